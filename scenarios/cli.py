@@ -61,6 +61,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except USER_ERRORS as exc:
         print(f"robotsim: error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR
+    except OSError as exc:
+        # A file system failure (unwritable folder, disk full) while reading or writing
+        # outputs: one line, and the atomic writers have already removed their partial files.
+        target = f" {exc.filename}" if exc.filename else ""
+        print(f"robotsim: error:{target}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("robotsim: interrupted", file=sys.stderr)
         return 130

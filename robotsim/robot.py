@@ -1,0 +1,113 @@
+"""The differential-drive robot: its parameters and kinematics (MODELS.md section 2).
+
+Wheel rates ``w_l, w_r`` (rad/s), radii ``r_l, r_r`` (m), wheel base ``L`` (m):
+
+    v     = (r_r w_r + r_l w_l) / 2        forward speed, m/s
+    omega = (r_r w_r - r_l w_l) / L        yaw rate, rad/s
+
+The robot's software knows only the nominal radius ``wheel_radius_m``; the world moves it
+with the true radii, which differ by a calibration error (what makes odometry drift).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from robotsim.errors import RobotsimError
+
+
+def wrap_angle(angle_rad):
+    """Angles wrapped to ``[-pi, pi)`` (array or float)."""
+    return (np.asarray(angle_rad) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """A disk-shaped differential-drive robot.
+
+    Attributes:
+        wheel_radius_m: nominal wheel radius, the one the estimator knows.
+        true_wheel_radius_left_m, true_wheel_radius_right_m: the radii the world uses.
+        wheel_base_m: distance between the wheel contact points.
+        ticks_per_rev: encoder ticks per wheel revolution.
+        radius_m: radius of the footprint disk (collision shape; the sonar belt sits on it).
+        mass_kg: body mass.
+        v_max_m_s, omega_max_rad_s: bounds on the true forward speed and yaw rate.
+        a_max_m_s2: bound on the forward acceleration; the yaw acceleration is bounded by
+            ``alpha_max_rad_s2 = 2 a_max / wheel_base`` (each wheel at most ``a_max``).
+    """
+
+    wheel_radius_m: float = 0.05
+    true_wheel_radius_left_m: float = 0.0503
+    true_wheel_radius_right_m: float = 0.0498
+    wheel_base_m: float = 0.30
+    ticks_per_rev: int = 2048
+    radius_m: float = 0.20
+    mass_kg: float = 8.0
+    v_max_m_s: float = 0.6
+    omega_max_rad_s: float = 1.5
+    a_max_m_s2: float = 0.5
+
+    def __post_init__(self) -> None:
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise RobotsimError(f"robot {field.name} must be a number, got {value!r}")
+            if not (math.isfinite(value) and value > 0):
+                raise RobotsimError(f"robot {field.name} must be positive and finite, got {value}")
+        if int(self.ticks_per_rev) != self.ticks_per_rev:
+            raise RobotsimError(f"robot ticks_per_rev must be an integer, got {self.ticks_per_rev}")
+
+    @property
+    def alpha_max_rad_s2(self) -> float:
+        """Bound on the yaw acceleration, ``2 a_max / wheel_base``."""
+        return 2.0 * self.a_max_m_s2 / self.wheel_base_m
+
+    @property
+    def true_radii_m(self) -> np.ndarray:
+        """True wheel radii ``(2,)`` = (left, right)."""
+        return np.array([self.true_wheel_radius_left_m, self.true_wheel_radius_right_m])
+
+    @property
+    def nominal_radii_m(self) -> np.ndarray:
+        """Nominal wheel radii ``(2,)`` = (left, right)."""
+        return np.full(2, self.wheel_radius_m)
+
+
+def body_velocity(wheel_rate_rad_s, radii_m, wheel_base_m: float) -> np.ndarray:
+    """Body velocity ``(..., 2)`` = (v_m_s, omega_rad_s) from wheel rates ``(..., 2)``
+    (left, right) and radii ``(2,)`` (left, right)."""
+    travel = np.asarray(wheel_rate_rad_s) * np.asarray(radii_m)  # wheel rim speeds, m/s
+    return np.stack(
+        [0.5 * (travel[..., 1] + travel[..., 0]), (travel[..., 1] - travel[..., 0]) / wheel_base_m],
+        axis=-1,
+    )
+
+
+def wheel_rates(velocity, radii_m, wheel_base_m: float) -> np.ndarray:
+    """Wheel rates ``(..., 2)`` rad/s (left, right) giving body velocity ``(..., 2)``
+    = (v_m_s, omega_rad_s): the inverse of :func:`body_velocity`."""
+    velocity = np.asarray(velocity)
+    v, omega = velocity[..., 0], velocity[..., 1]
+    half_turn = 0.5 * wheel_base_m * omega
+    radii = np.asarray(radii_m)
+    return np.stack([(v - half_turn) / radii[0], (v + half_turn) / radii[1]], axis=-1)
+
+
+def integrate_pose(pose, velocity, dt_s: float) -> np.ndarray:
+    """Exact unicycle step: poses ``(..., 3)`` moved for ``dt_s`` at constant body velocity
+    ``(..., 2)`` = (v, omega) along a circular arc (a straight line when omega = 0)."""
+    pose, velocity = np.asarray(pose, dtype=np.float64), np.asarray(velocity, dtype=np.float64)
+    theta, v, omega = pose[..., 2], velocity[..., 0], velocity[..., 1]
+    turn = omega * dt_s
+    # chord length / (v dt) = sinc(turn / 2); the chord points along theta + turn / 2
+    chord = v * dt_s * np.sinc(turn / (2.0 * np.pi))
+    heading = theta + 0.5 * turn
+    return np.stack(
+        [pose[..., 0] + chord * np.cos(heading), pose[..., 1] + chord * np.sin(heading),
+         wrap_angle(theta + turn)],
+        axis=-1,
+    )

@@ -1,0 +1,1 @@
+"""Simulated sensors: wheel encoders, gyro and accelerometer, the sonar belt."""

@@ -1,0 +1,260 @@
+"""The sonar belt: the exact cone distance model and simulated readings with bounded errors.
+
+Model (MODELS.md section 3; paper 002 fig. 3 after Kieffer et al. 2000). Sensor i sits at
+``s~_i`` in the robot frame and points along ``theta~_i``; in the world
+``s_i = (x, y) + R(theta) s~_i`` and its cone holds the directions
+``[theta + theta~_i - gamma, theta + theta~_i + gamma]``. The modelled distance is
+
+    d_i(p) = min_j r(s_i, cone_i, [a_j, b_j])        (+inf if no segment meets the cone)
+
+where ``r`` is the distance from ``s_i`` to the nearest point of segment j inside the cone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from robotsim.errors import RobotsimError
+
+#: Relative slack of the inside-the-cone and on-the-segment tests: a point on a cone edge
+#: is kept by both the point test and the edge-ray test, so rounding cannot lose it.
+_SLACK = 1e-12
+
+#: Upper bound on the elements of one broadcast block (poses x sensors x segments).
+_BLOCK_ELEMENTS = 1 << 20
+
+
+def _det(u_x, u_y, w_x, w_y):
+    """2-D determinant ``det(u, w) = u_x w_y - u_y w_x`` (broadcast)."""
+    return u_x * w_y - u_y * w_x
+
+
+def _inside_cone(w_x, w_y, c_x, c_y, cos_gamma):
+    """Whether offset ``w`` from the apex lies in the cone of axis ``c`` (unit), half-angle
+    gamma < pi/2: ``w . c >= |w| cos(gamma)`` (the apex itself counts as inside)."""
+    return w_x * c_x + w_y * c_y >= np.hypot(w_x, w_y) * (cos_gamma - _SLACK)
+
+
+def _cone_distances_block(
+    s_x: np.ndarray, s_y: np.ndarray, phi: np.ndarray, a: np.ndarray, e: np.ndarray, gamma: float
+) -> np.ndarray:
+    """Cone distances ``(n, k)`` for sensor positions/axes ``(n, k, 1)`` and segments
+    ``a`` (start) and ``e = b - a`` (each ``(m, 2)``)."""
+    a_x, a_y, e_x, e_y = a[:, 0], a[:, 1], e[:, 0], e[:, 1]
+    cos_gamma = np.cos(gamma)
+    c_x, c_y = np.cos(phi), np.sin(phi)
+    # offsets from the sensor to the segment start, (n, k, m)
+    w_x, w_y = a_x - s_x, a_y - s_y
+    best = np.full(np.broadcast_shapes(w_x.shape), np.inf)
+
+    # candidates 1 and 2: the segment's end points a and b inside the cone
+    for off_x, off_y in ((w_x, w_y), (w_x + e_x, w_y + e_y)):
+        inside = _inside_cone(off_x, off_y, c_x, c_y, cos_gamma)
+        best = np.where(inside, np.minimum(best, np.hypot(off_x, off_y)), best)
+
+    # candidate 3: the foot of the perpendicular a + t (b - a), t = (s - a).e / |e|^2
+    t = -(w_x * e_x + w_y * e_y) / (e_x * e_x + e_y * e_y)
+    foot_x, foot_y = w_x + t * e_x, w_y + t * e_y
+    keep = (t >= 0.0) & (t <= 1.0) & _inside_cone(foot_x, foot_y, c_x, c_y, cos_gamma)
+    best = np.where(keep, np.minimum(best, np.hypot(foot_x, foot_y)), best)
+
+    # candidates 4 and 5: each edge ray u meets the segment at
+    # rho = det(a - s, e) / det(u, e) (along the ray), tau = det(a - s, u) / det(u, e)
+    det_w_e = _det(w_x, w_y, e_x, e_y)
+    for edge in (phi - gamma, phi + gamma):
+        u_x, u_y = np.cos(edge), np.sin(edge)
+        denominator = _det(u_x, u_y, e_x, e_y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = det_w_e / denominator
+            tau = _det(w_x, w_y, u_x, u_y) / denominator
+        hit = (denominator != 0.0) & (rho >= 0.0) & (tau >= -_SLACK) & (tau <= 1.0 + _SLACK)
+        best = np.where(hit, np.minimum(best, rho), best)
+    return best.min(axis=-1)
+
+
+def cone_distances(
+    poses: Any,
+    segments: Any,
+    mount_xy: Any,
+    mount_angle_rad: Any,
+    half_aperture_rad: float,
+) -> np.ndarray:
+    """Exact distance from each sonar to the nearest map point inside its cone.
+
+    Args:
+        poses: ``(..., 3)`` robot poses ``(x_m, y_m, theta_rad)``, world frame.
+        segments: ``(m, 2, 2)`` map segments, metres, world frame.
+        mount_xy: ``(k, 2)`` sensor positions, robot frame, metres.
+        mount_angle_rad: ``(k,)`` sensor axis angles, robot frame.
+        half_aperture_rad: cone half-angle gamma, ``0 < gamma < pi/2``.
+
+    Returns:
+        ``(..., k)`` distances in metres, ``np.inf`` where no segment meets the cone. No
+        range limit is applied here.
+
+    Vectorised over poses, sensors and segments (broadcast arrays); large batches are cut
+    into blocks of at most about a million pose-sensor-segment elements to bound memory.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    segments = np.asarray(segments, dtype=np.float64)
+    mount_xy = np.asarray(mount_xy, dtype=np.float64)
+    mount_angle_rad = np.asarray(mount_angle_rad, dtype=np.float64)
+    if poses.shape[-1:] != (3,):
+        raise RobotsimError(f"poses must have shape (..., 3), got {poses.shape}")
+    if segments.ndim != 3 or segments.shape[1:] != (2, 2):
+        raise RobotsimError(f"segments must have shape (m, 2, 2), got {segments.shape}")
+    if mount_xy.ndim != 2 or mount_xy.shape[1] != 2 or mount_angle_rad.shape != mount_xy[:, 0].shape:
+        raise RobotsimError(
+            f"mount_xy must be (k, 2) and mount_angle_rad (k,), got {mount_xy.shape} and "
+            f"{mount_angle_rad.shape}"
+        )
+    if not 0.0 < half_aperture_rad < np.pi / 2:
+        raise RobotsimError(f"half_aperture_rad must be in (0, pi/2), got {half_aperture_rad}")
+
+    batch_shape = poses.shape[:-1]
+    flat = poses.reshape(-1, 3)
+    k, m = len(mount_angle_rad), len(segments)
+    x, y, theta = (flat[:, i, None] for i in range(3))  # (n, 1)
+    cos_t, sin_t = np.cos(theta), np.sin(theta)
+    # s_i = (x, y) + R(theta) s~_i, axis phi_i = theta + theta~_i; shapes (n, k, 1)
+    s_x = (x + cos_t * mount_xy[:, 0] - sin_t * mount_xy[:, 1])[..., None]
+    s_y = (y + sin_t * mount_xy[:, 0] + cos_t * mount_xy[:, 1])[..., None]
+    phi = (theta + mount_angle_rad)[..., None]
+    a, e = segments[:, 0], segments[:, 1] - segments[:, 0]
+
+    out = np.full((len(flat), k), np.inf)
+    if m == 0:
+        return out.reshape(*batch_shape, k)
+    block = max(1, _BLOCK_ELEMENTS // max(1, k * m))
+    for start in range(0, len(flat), block):
+        rows = slice(start, start + block)
+        out[rows] = _cone_distances_block(
+            s_x[rows], s_y[rows], phi[rows], a, e, half_aperture_rad
+        )
+    return out.reshape(*batch_shape, k)
+
+
+def _read_only(values: Any, shape_name: str) -> np.ndarray:
+    array = np.array(values, dtype=np.float64)
+    if not np.isfinite(array).all():
+        raise RobotsimError(f"sonar {shape_name} must be finite")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class SonarBeltParams:
+    """A belt of k sonars firing together at ``rate_hz``.
+
+    Attributes:
+        mount_xy: ``(k, 2)`` sensor positions, robot frame, metres.
+        mount_angle_rad: ``(k,)`` sensor axes, robot frame, radians CCW from forward.
+        half_aperture_rad: cone half-angle gamma, ``0 < gamma < pi/2``.
+        d_max_m: range limit; a true cone distance beyond it gives no echo (``inf``).
+        error_abs_bound_m, error_rel_bound: the reading error obeys
+            ``|e| <= error_abs_bound_m + error_rel_bound * d`` (``0 <= error_rel_bound < 1``).
+        rate_hz: scans per second.
+        outlier_prob: probability that a reading is replaced by a uniform value in
+            ``[0, d_max_m]`` (a fault; 0 disables).
+        lost_echo_prob: probability that an echo is lost (reading ``inf``; 0 disables).
+    """
+
+    mount_xy: np.ndarray
+    mount_angle_rad: np.ndarray
+    half_aperture_rad: float
+    d_max_m: float = 3.0
+    error_abs_bound_m: float = 0.02
+    error_rel_bound: float = 0.01
+    rate_hz: float = 1.0
+    outlier_prob: float = 0.0
+    lost_echo_prob: float = 0.0
+
+    def __post_init__(self) -> None:
+        mount_xy = _read_only(self.mount_xy, "mount_xy")
+        mount_angle = _read_only(self.mount_angle_rad, "mount_angle_rad")
+        if mount_xy.ndim != 2 or mount_xy.shape[1] != 2 or len(mount_xy) == 0:
+            raise RobotsimError(f"sonar mount_xy must have shape (k, 2), k >= 1, got {mount_xy.shape}")
+        if mount_angle.shape != (len(mount_xy),):
+            raise RobotsimError(
+                f"sonar mount_angle_rad must have shape ({len(mount_xy)},), got {mount_angle.shape}"
+            )
+        object.__setattr__(self, "mount_xy", mount_xy)
+        object.__setattr__(self, "mount_angle_rad", mount_angle)
+        checks = [
+            (0.0 < self.half_aperture_rad < np.pi / 2, "half_aperture_rad must be in (0, pi/2)"),
+            (0.0 < self.d_max_m < np.inf, "d_max_m must be positive and finite"),
+            (0.0 <= self.error_abs_bound_m < np.inf, "error_abs_bound_m must be >= 0"),
+            (0.0 <= self.error_rel_bound < 1.0, "error_rel_bound must be in [0, 1)"),
+            (0.0 < self.rate_hz < np.inf, "rate_hz must be positive"),
+            (0.0 <= self.outlier_prob <= 1.0, "outlier_prob must be in [0, 1]"),
+            (0.0 <= self.lost_echo_prob <= 1.0, "lost_echo_prob must be in [0, 1]"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise RobotsimError(f"sonar: {message}")
+
+    @property
+    def count(self) -> int:
+        """Number of sensors k."""
+        return len(self.mount_angle_rad)
+
+    @classmethod
+    def default_belt(
+        cls,
+        robot_radius_m: float = 0.2,
+        count: int = 16,
+        half_aperture_rad: float = np.deg2rad(12.5),
+        **settings: Any,
+    ) -> SonarBeltParams:
+        """``count`` sensors evenly around the rim of a disk robot, the first one facing
+        forward, each pointing radially outwards. ``settings`` are the other fields
+        (``d_max_m``, error bounds, rate, fault probabilities)."""
+        if count < 1 or not robot_radius_m > 0:
+            raise RobotsimError(
+                f"sonar belt needs count >= 1 and robot_radius_m > 0, got {count}, {robot_radius_m}"
+            )
+        angle = 2.0 * np.pi * np.arange(count) / count
+        angle = np.where(angle >= np.pi, angle - 2.0 * np.pi, angle)  # wrap to [-pi, pi)
+        mount_xy = robot_radius_m * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        return cls(
+            mount_xy=mount_xy, mount_angle_rad=angle, half_aperture_rad=half_aperture_rad, **settings
+        )
+
+
+def simulate_readings(
+    true_distance_m: Any, params: SonarBeltParams, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Readings and fault mask from true cone distances ``(M, k)`` (any shape works).
+
+    Error model (the team contract):
+    - no echo (``inf``) iff the true distance ``d > d_max_m``;
+    - otherwise ``d + e``, ``e`` uniform in ``[-bound, bound]``,
+      ``bound = error_abs_bound_m + error_rel_bound * d``, then clipped at 0 (the clip moves
+      a reading towards ``d`` so the bound still holds);
+    - faults: a lost echo (probability ``lost_echo_prob``) turns an echo into ``inf``; an
+      outlier (probability ``outlier_prob``, drawn for every reading, echo or not, unless
+      that echo was lost) replaces the reading by a uniform value in ``[0, d_max_m]``.
+
+    Every random array is drawn in bulk, whatever the probabilities, so turning a fault on
+    does not change the other draws of the same generator.
+
+    Returns:
+        ``(readings_m, fault)``: readings like ``true_distance_m`` (``inf`` = no echo) and a
+        bool mask of faulty readings (outliers and lost echoes; truth, for tests only).
+    """
+    d = np.asarray(true_distance_m, dtype=np.float64)
+    unit_error = rng.uniform(-1.0, 1.0, size=d.shape)
+    lost_draw = rng.random(size=d.shape)
+    outlier_draw = rng.random(size=d.shape)
+    outlier_value = rng.uniform(0.0, params.d_max_m, size=d.shape)
+
+    echo = d <= params.d_max_m
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(echo, d, 0.0)
+    readings = np.where(echo, np.maximum(np.where(echo, d, 0.0) + unit_error * bound, 0.0), np.inf)
+    lost = echo & (lost_draw < params.lost_echo_prob)
+    outlier = ~lost & (outlier_draw < params.outlier_prob)
+    readings = np.where(lost, np.inf, np.where(outlier, outlier_value, readings))
+    return readings, lost | outlier

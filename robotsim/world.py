@@ -1,0 +1,173 @@
+"""The pymunk world: the map as static walls, the robot as a dynamic disk.
+
+Units are metres, kilograms, seconds. The robot is driven like pymunk's "tank" example: a
+kinematic control body carries the wanted velocity, and two constraints with finite
+forces drag the robot body along, as the wheels' traction would:
+
+- a ``PivotJoint`` with ``max_bias = 0`` matches the velocities of the two bodies' centres
+  (no position correction) with at most ``traction_force_n``;
+- a ``GearJoint`` with ``max_bias = 0`` matches their yaw rates with at most
+  ``traction_torque_nm``.
+
+Wall contacts have unbounded force, so a wall stops the robot while the traction gives
+way. The true pose and velocity are whatever pymunk computes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pymunk
+import shapely
+
+from robotsim.errors import RobotsimError
+from robotsim.maps import SegmentMap, point_segment_distance
+from robotsim.robot import RobotParams
+
+_GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    """Physics settings.
+
+    Attributes:
+        step_hz: physics (and sensor sampling) rate; one :meth:`World.step` lasts 1/step_hz.
+        substeps: pymunk steps per :meth:`World.step` (finer collision handling).
+        wall_radius_m: thickness radius of the wall segments (collision only; the sonar
+            model uses the zero-width segments).
+        collision_slop_m: allowed overlap of shapes (pymunk's default assumes pixels).
+        traction_coefficient: traction force = coefficient * mass * g (newtons); the
+            torque is the same force at half the wheel base.
+        wall_friction: Coulomb friction between robot and walls.
+        solver_iterations: pymunk solver iterations per step.
+    """
+
+    step_hz: float = 100.0
+    substeps: int = 1
+    wall_radius_m: float = 0.02
+    collision_slop_m: float = 1e-3
+    traction_coefficient: float = 1.0
+    wall_friction: float = 0.3
+    solver_iterations: int = 10
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.step_hz > 0 and math.isfinite(self.step_hz), "step_hz must be positive"),
+            (int(self.substeps) == self.substeps and self.substeps >= 1,
+             "substeps must be an integer >= 1"),
+            (self.wall_radius_m >= 0, "wall_radius_m must be >= 0"),
+            (self.collision_slop_m >= 0, "collision_slop_m must be >= 0"),
+            (self.traction_coefficient > 0, "traction_coefficient must be positive"),
+            (self.wall_friction >= 0, "wall_friction must be >= 0"),
+            (int(self.solver_iterations) == self.solver_iterations and self.solver_iterations >= 1,
+             "solver_iterations must be an integer >= 1"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise RobotsimError(f"world: {message}")
+
+
+class World:
+    """A pymunk space holding the walls of ``segment_map`` and the robot at ``pose``.
+
+    Mutable (it is the simulation state); :meth:`step` advances it by ``1 / step_hz``.
+    """
+
+    def __init__(
+        self,
+        segment_map: SegmentMap,
+        robot: RobotParams,
+        pose,
+        params: WorldParams = WorldParams(),
+    ) -> None:
+        self.map = segment_map
+        self.robot = robot
+        self.params = params
+        self.dt_s = 1.0 / params.step_hz
+        self._substep_s = self.dt_s / params.substeps
+        self._substeps = range(int(params.substeps))
+        self._velocity_lead_s = 0.5 * self.dt_s + self._substep_s
+
+        space = pymunk.Space()
+        space.iterations = int(params.solver_iterations)
+        space.collision_slop = params.collision_slop_m
+        for (ax, ay), (bx, by) in segment_map.segments.tolist():
+            wall = pymunk.Segment(space.static_body, (ax, ay), (bx, by), params.wall_radius_m)
+            wall.friction = params.wall_friction
+            space.add(wall)
+
+        moment = pymunk.moment_for_circle(robot.mass_kg, 0.0, robot.radius_m)
+        body = pymunk.Body(robot.mass_kg, moment)
+        disk = pymunk.Circle(body, robot.radius_m)
+        disk.friction = 1.0  # combined with the wall's by multiplication
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        traction_n = params.traction_coefficient * robot.mass_kg * _GRAVITY_M_S2
+        pivot = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
+        pivot.max_bias = 0.0  # match velocities only
+        pivot.max_force = traction_n
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.max_bias = 0.0
+        gear.max_force = traction_n * 0.5 * robot.wheel_base_m
+        space.add(body, disk, control, pivot, gear)
+
+        self._space, self._body, self._control = space, body, control
+        self.teleport(pose)
+
+    def check_free(self, pose) -> np.ndarray:
+        """The pose as a float array ``(3,)`` if the robot's disk fits there (clear of all
+        walls, inside the boundary); otherwise a :class:`RobotsimError` naming the reason."""
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            raise RobotsimError(
+                f"a pose must be 3 finite numbers (x_m, y_m, theta_rad), got {pose.tolist()}"
+            )
+        segments = self.map.segments
+        clearance = point_segment_distance(pose[:2], segments[:, 0], segments[:, 1])
+        needed = self.robot.radius_m + self.params.wall_radius_m
+        if clearance.min() < needed:
+            index = int(np.argmin(clearance))
+            raise RobotsimError(
+                f"the robot at ({pose[0]:g}, {pose[1]:g}) overlaps wall segment {index} of map "
+                f"{self.map.name!r} (clearance {clearance.min():.3f} m < {needed:.3f} m)"
+            )
+        if self.map.boundary is not None and not shapely.contains_xy(
+            shapely.Polygon(self.map.boundary), pose[0], pose[1]
+        ):
+            raise RobotsimError(
+                f"the robot at ({pose[0]:g}, {pose[1]:g}) is outside the walls of map {self.map.name!r}"
+            )
+        return pose
+
+    def teleport(self, pose) -> None:
+        """Put the robot at ``pose`` (x_m, y_m, theta_rad), keeping its velocity (a kidnap)."""
+        x, y, theta = self.check_free(pose).tolist()
+        for body in (self._body, self._control):
+            body.position = (x, y)
+            body.angle = theta
+        self._space.reindex_shapes_for_body(self._body)
+
+    def step(self, v_m_s: float, omega_rad_s: float) -> None:
+        """Advance ``1 / step_hz`` seconds while the wheels try to move the robot at the
+        true body velocity ``(v_m_s, omega_rad_s)`` (robot frame)."""
+        control, space, substep_s = self._control, self._space, self._substep_s
+        # pymunk moves a body with the velocity solved one substep earlier, so the velocity
+        # set now acts from ``substep_s`` after the step's start to as long after its end:
+        # point it along the heading at the middle of that interval
+        heading = self._body.angle + omega_rad_s * self._velocity_lead_s
+        control.velocity = (v_m_s * math.cos(heading), v_m_s * math.sin(heading))
+        control.angular_velocity = omega_rad_s
+        for _ in self._substeps:
+            space.step(substep_s)
+
+    def state(self) -> tuple[float, float, float, float, float]:
+        """True ``(x_m, y_m, theta_rad, v_m_s, omega_rad_s)``: theta unwrapped, ``v`` the
+        velocity component along the heading."""
+        body = self._body
+        x, y = body.position
+        vx, vy = body.velocity
+        theta = body.angle
+        return x, y, theta, vx * math.cos(theta) + vy * math.sin(theta), body.angular_velocity
+

@@ -1,0 +1,110 @@
+"""The ``run`` and ``scenarios`` sub-commands of ``robotsim`` (``scenarios.cli`` wires them).
+
+``robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]`` runs one
+scenario headless and writes its rerun recording and its JSON summary, both atomically: a
+user error or a crash leaves neither file behind (nor a half of one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import TextIO
+
+from scenarios import outputs
+from scenarios.spec import DEFAULT_MAP, builtin_names, load_scenario
+
+#: Where ``robotsim run`` writes when no path is given.
+DEFAULT_RUNS_DIR = Path("runs")
+
+#: The part of the progress bar the simulation fills; the recording fills the rest.
+SIMULATION_SHARE = 0.85
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``robotsim run``."""
+    parser.add_argument(
+        "scenario",
+        nargs="?",
+        default=DEFAULT_MAP,
+        metavar="SCENARIO",
+        help=f"a built-in scenario ({', '.join(builtin_names())}) or a TOML file (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--rrd", type=Path, metavar="PATH", help="recording to write (default: runs/<scenario>-seed<N>.rrd)"
+    )
+    parser.add_argument(
+        "--summary", type=Path, metavar="PATH", help="summary JSON to write (default: runs/<scenario>-seed<N>.json)"
+    )
+    parser.add_argument("--seed", type=int, metavar="N", help="override the scenario's seed")
+    parser.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, seconds")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``robotsim run``: simulate, summarise, record; returns the exit status."""
+    from scenarios.recording import write_recording
+    from scenarios.runner import run_scenario
+
+    spec = load_scenario(args.scenario).with_run(seed=args.seed, duration_s=args.duration)
+    stem = f"{spec.name}-seed{spec.run.seed}"
+    rrd_path = args.rrd or DEFAULT_RUNS_DIR / f"{stem}.rrd"
+    summary_path = args.summary or DEFAULT_RUNS_DIR / f"{stem}.json"
+
+    bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
+    start = time.perf_counter()
+    try:
+        result = run_scenario(spec, progress=(lambda done: bar.update(SIMULATION_SHARE * done)) if bar else None)
+        with outputs.atomic_path(rrd_path) as rrd_tmp, outputs.atomic_path(summary_path) as summary_tmp:
+            recording_start = time.perf_counter()
+            write_recording(rrd_tmp, spec, result.log)
+            recording_s = time.perf_counter() - recording_start
+            if bar:
+                bar.update(1.0)
+            summary = result.summary_with_timing(recording_s=recording_s, wall_s=time.perf_counter() - start)
+            outputs.write_json(summary_tmp, summary)
+    finally:
+        if bar:
+            bar.close()
+    timing = summary["timing"]
+    print(
+        f"{spec.name}: {spec.run.duration_s:g} s simulated in {timing['wall_s']:.2f} s "
+        f"({timing['realtime_factor']:.0f}x real time); wrote {rrd_path} and {summary_path}"
+    )
+    return 0
+
+
+def list_scenarios(args: argparse.Namespace) -> int:
+    """``robotsim scenarios``: one line per built-in scenario, with its description."""
+    names = builtin_names()
+    width = max(map(len, names))
+    for name in names:
+        print(f"{name:<{width}}  {load_scenario(name).description}")
+    return 0
+
+
+class ProgressBar:
+    """A one-line progress bar redrawn in place on a terminal stream."""
+
+    WIDTH = 30
+
+    def __init__(self, stream: TextIO, label: str):
+        self._stream = stream
+        self._label = label
+        self._shown = -1
+
+    def update(self, fraction: float) -> None:
+        """Show ``fraction`` (0 to 1) of the run done; redraws only when the bar changes."""
+        percent = int(100 * min(max(fraction, 0.0), 1.0))
+        if percent == self._shown:
+            return
+        self._shown = percent
+        filled = percent * self.WIDTH // 100
+        self._stream.write(f"\r{self._label} [{'#' * filled}{'.' * (self.WIDTH - filled)}] {percent:3d}%")
+        self._stream.flush()
+
+    def close(self) -> None:
+        """End the bar's line."""
+        self._stream.write("\n")
+        self._stream.flush()

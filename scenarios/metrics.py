@@ -1,0 +1,112 @@
+"""The summary of one run: a JSON-ready dict of figures computed from its log.
+
+Deterministic: the same scenario and seed give the same dict. Wall-clock figures are not
+here; ``scenarios.runner`` adds them under a separate ``timing`` key so tests can compare
+everything else exactly.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from robotsim.maps import point_segment_distance
+from robotsim.sensors.imu import specific_force
+
+if TYPE_CHECKING:
+    from robotsim.simulation import SimulationLog
+    from scenarios.spec import ScenarioSpec
+
+
+def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
+    """The summary of a run of ``spec`` that produced ``log`` (no timing)."""
+    summary: dict[str, Any] = {
+        "scenario": spec.name,
+        "seed": spec.run.seed,
+        "duration_s": spec.run.duration_s,
+        "map": spec.map.name,
+        "samples": int(len(log.t_s)),
+        "scans": int(len(log.sonar_t_s)),
+        "distance_m": path_length_m(log.pose),
+        "final_pose": [float(v) for v in log.pose[-1]],
+    }
+    summary["walls"] = wall_stats(log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m)
+    summary["sensors"] = {
+        "encoders": encoder_stats(log.wheel_ticks),
+        "gyro": gyro_stats(log.gyro_rad_s, log.velocity[:, 1]),
+        "accelerometer": accelerometer_stats(log.accel_m_s2, log.velocity, spec.run.rate_hz),
+        "sonar": sonar_stats(spec, log),
+    }
+    return summary
+
+
+def path_length_m(pose: np.ndarray) -> float:
+    """Length of the true path ``pose (N, 3)``, metres."""
+    return float(np.hypot(*np.diff(pose[:, :2], axis=0).T).sum())
+
+
+#: A footprint closer to a wall than this (metres) counts as touching it.
+CONTACT_GAP_M = 0.005
+
+
+def wall_stats(pose: np.ndarray, segments: np.ndarray, reach_m: float) -> dict[str, Any]:
+    """Smallest gap between the footprint and a wall, and the samples in contact.
+
+    ``reach_m`` is the robot radius plus the walls' collision radius; a gap below
+    ``CONTACT_GAP_M`` is a contact (pymunk lets shapes overlap by its collision slop).
+    """
+    distance = point_segment_distance(pose[:, None, :2], segments[:, 0], segments[:, 1]).min(axis=1)
+    gap = distance - reach_m
+    return {"min_gap_m": float(gap.min()), "contact_samples": int(np.count_nonzero(gap < CONTACT_GAP_M))}
+
+
+def encoder_stats(wheel_ticks: np.ndarray) -> dict[str, Any]:
+    """Total ticks per wheel ``(N, 2)`` and the largest increment of one sample."""
+    return {
+        "ticks_total": [int(v) for v in wheel_ticks.sum(axis=0)],
+        "ticks_per_sample_max": int(np.abs(wheel_ticks).max()) if len(wheel_ticks) else 0,
+    }
+
+
+def gyro_stats(gyro_rad_s: np.ndarray, true_omega_rad_s: np.ndarray) -> dict[str, float]:
+    """Mean (bias plus noise mean) and standard deviation of the gyro error, rad/s."""
+    error = gyro_rad_s - true_omega_rad_s
+    return {"error_mean_rad_s": float(error.mean()), "error_std_rad_s": float(error.std())}
+
+
+def accelerometer_stats(accel_m_s2: np.ndarray, velocity: np.ndarray, rate_hz: float) -> dict[str, list[float]]:
+    """Mean and standard deviation of the error ``(2,)`` of the body-frame specific force,
+    against the specific force of the true motion (``robotsim.sensors.imu.specific_force``)."""
+    error = accel_m_s2 - specific_force(velocity, rate_hz)
+    return {
+        "error_mean_m_s2": [float(e) for e in error.mean(axis=0)],
+        "error_std_m_s2": [float(e) for e in error.std(axis=0)],
+    }
+
+
+def sonar_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
+    """Echo and fault counts, and the worst reading error as a share of its declared bound.
+
+    The true distances are the exact cone distances at the true scan poses; an error
+    share above 1 on a reading that is not a fault would mean the simulator broke its bound.
+    """
+    sonar = spec.sensors.sonar
+    ranges = log.sonar_range_m
+    echo = np.isfinite(ranges)
+    stats: dict[str, Any] = {
+        "readings": int(ranges.size),
+        "echoes": int(echo.sum()),
+        "faults": int(np.asarray(log.sonar_fault).sum()),
+    }
+    true_m = log.sonar_true_range_m
+    good = echo & ~np.asarray(log.sonar_fault, dtype=bool) & np.isfinite(true_m)
+    if good.any():
+        error = np.abs(ranges[good] - true_m[good])
+        bound = sonar.error_abs_bound_m + sonar.error_rel_bound * true_m[good]
+        stats["range_min_m"] = float(ranges[good].min())
+        stats["range_max_m"] = float(ranges[good].max())
+        stats["error_abs_max_m"] = float(error.max())
+        if (bound > 0).all():
+            stats["error_bound_share_max"] = float((error / bound).max())
+    return stats

@@ -1,0 +1,204 @@
+"""The rerun recording of one run: the map, the truth, the sonar scans and the sensor series.
+
+Everything time-varying is sent in bulk with ``send_columns`` on one ``time`` timeline
+(seconds since the start of the run): one call per entity, never one log call per sample.
+Entity paths (the tests read them back):
+
+- ``world/map/walls``: the map segments, static ``LineStrips2D``;
+- ``world/robot/path``: the whole true trajectory, static ``LineStrips2D``;
+- ``world/robot/footprint``: the true position with the footprint disk, ``Ellipses2D`` (N rows);
+- ``world/robot/heading``: an arrow along the true heading, ``Arrows2D`` (N rows);
+- ``world/sonar/cones``: each sensor's cone at each scan, out to the reading (or to ``d_max``
+  when there is no echo), ``LineStrips2D`` (M rows of k strips);
+- ``world/sonar/echoes``: the point of each finite reading on its sensor's axis, ``Points2D``
+  (M rows);
+- ``sensors/encoders/left``, ``sensors/encoders/right``: ticks per sample, ``Scalars`` (N);
+- ``sensors/gyro/rate_rad_s``: ``Scalars`` (N);
+- ``sensors/accelerometer/x_m_s2``, ``.../y_m_s2``: body-frame specific force, ``Scalars`` (N);
+- ``truth/v_m_s``, ``truth/omega_rad_s``: true body velocity, ``Scalars`` (N).
+
+The default blueprint puts the 2-D map view beside the time series.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+if TYPE_CHECKING:
+    from robotsim.sensors.sonar import SonarBeltParams
+    from robotsim.simulation import SimulationLog
+    from scenarios.spec import ScenarioSpec
+
+APPLICATION_ID = "robotsim"
+TIMELINE = "time"
+
+#: Points on the arc of each drawn sonar cone.
+CONE_ARC_POINTS = 7
+
+WALL_COLOR = (200, 200, 200)
+TRUTH_COLOR = (60, 200, 80)
+CONE_ECHO_COLOR = (90, 160, 255)
+CONE_NO_ECHO_COLOR = (90, 90, 90)
+ECHO_COLOR = (255, 140, 0)
+
+
+def write_recording(path: str | Path, spec: ScenarioSpec, log: SimulationLog) -> None:
+    """Write the recording of ``log`` (a run of ``spec``) to the ``.rrd`` file ``path``."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
+    rec.save(path, default_blueprint=default_blueprint())
+    record_run(rec, spec, log)
+    rec.flush()
+    rec.disconnect()
+
+
+def default_blueprint() -> rrb.Blueprint:
+    """The 2-D map view (world) beside the sensor and truth time series."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial2DView(origin="world", name="map"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="sensors/encoders", name="encoders (ticks per sample)"),
+                rrb.TimeSeriesView(origin="sensors/gyro", name="gyro (rad/s)"),
+                rrb.TimeSeriesView(origin="sensors/accelerometer", name="accelerometer (m/s²)"),
+                rrb.TimeSeriesView(origin="truth", name="true velocity"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+def record_run(rec: rr.RecordingStream, spec: ScenarioSpec, log: SimulationLog) -> None:
+    """Send the map, the truth, the sonar scans and the sensor series of one run to ``rec``."""
+    record_map(rec, spec.map.segments)
+    record_truth(rec, log.t_s, log.pose, log.velocity, spec.robot.radius_m)
+    record_sonar(rec, log.sonar_t_s, log.sonar_pose, log.sonar_range_m, spec.sensors.sonar)
+    record_proprioceptive(rec, log.t_s, log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2)
+
+
+def record_map(rec: rr.RecordingStream, segments: np.ndarray) -> None:
+    """The map walls ``(m, 2, 2)``, static."""
+    rec.log("world/map/walls", rr.LineStrips2D(segments, colors=WALL_COLOR, radii=0.03), static=True)
+
+
+def record_truth(
+    rec: rr.RecordingStream, t_s: np.ndarray, pose: np.ndarray, velocity: np.ndarray, radius_m: float
+) -> None:
+    """The true path (static), footprint and heading ``pose (N, 3)``, and velocity ``(N, 2)``."""
+    times = [rr.TimeColumn(TIMELINE, duration=t_s)]
+    xy = np.ascontiguousarray(pose[:, :2])
+    n = len(t_s)
+    rec.log("world/robot/path", rr.LineStrips2D([xy], colors=TRUTH_COLOR, radii=0.01), static=True)
+    rec.send_columns(
+        "world/robot/footprint",
+        indexes=times,
+        columns=rr.Ellipses2D.columns(centers=xy, half_sizes=np.full((n, 2), radius_m)),
+    )
+    heading = radius_m * np.stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])], axis=1)
+    rec.send_columns("world/robot/heading", indexes=times, columns=rr.Arrows2D.columns(origins=xy, vectors=heading))
+    rec.send_columns("truth/v_m_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 0]))
+    rec.send_columns("truth/omega_rad_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 1]))
+
+
+def sensor_positions(sonar_pose: np.ndarray, mount_xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World positions ``x, y`` ``(M, k)`` of the sensors: ``s_i = (x, y) + R(theta) s~_i``."""
+    x, y, theta = sonar_pose[:, 0, None], sonar_pose[:, 1, None], sonar_pose[:, 2, None]
+    cos_t, sin_t = np.cos(theta), np.sin(theta)
+    return (
+        x + cos_t * mount_xy_m[:, 0] - sin_t * mount_xy_m[:, 1],
+        y + sin_t * mount_xy_m[:, 0] + cos_t * mount_xy_m[:, 1],
+    )
+
+
+def cone_outlines(
+    sonar_pose: np.ndarray,
+    range_m: np.ndarray,
+    mount_xy_m: np.ndarray,
+    mount_angle_rad: np.ndarray,
+    half_aperture_rad: float,
+    d_max_m: float,
+) -> np.ndarray:
+    """Closed outlines ``(M, k, CONE_ARC_POINTS + 2, 2)`` of every cone at every scan.
+
+    Each outline goes from the sensor, out along one edge to the reading (``d_max_m`` when
+    there is no echo), round the arc, and back to the sensor.
+    """
+    sx, sy = sensor_positions(sonar_pose, mount_xy_m)
+    theta = sonar_pose[:, 2, None]
+    reach = np.where(np.isfinite(range_m), range_m, d_max_m)  # (M, k)
+    arc = np.linspace(-half_aperture_rad, half_aperture_rad, CONE_ARC_POINTS)
+    phi = (theta + mount_angle_rad)[..., None] + arc  # (M, k, A)
+    arc_x = sx[..., None] + reach[..., None] * np.cos(phi)
+    arc_y = sy[..., None] + reach[..., None] * np.sin(phi)
+    outline = np.empty((*range_m.shape, CONE_ARC_POINTS + 2, 2))
+    outline[..., 0, 0], outline[..., 0, 1] = sx, sy
+    outline[..., 1:-1, 0], outline[..., 1:-1, 1] = arc_x, arc_y
+    outline[..., -1, :] = outline[..., 0, :]
+    return outline
+
+
+def echo_points(
+    sonar_pose: np.ndarray, range_m: np.ndarray, mount_xy_m: np.ndarray, mount_angle_rad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World points ``(E, 2)`` of the finite readings on their sensors' axes, and counts ``(M,)``."""
+    sx, sy = sensor_positions(sonar_pose, mount_xy_m)
+    theta = sonar_pose[:, 2, None]
+    echo = np.isfinite(range_m)
+    reach = np.where(echo, range_m, 0.0)
+    phi = theta + mount_angle_rad
+    points = np.stack([sx + reach * np.cos(phi), sy + reach * np.sin(phi)], axis=-1)
+    return points[echo], echo.sum(axis=1)
+
+
+def record_sonar(
+    rec: rr.RecordingStream,
+    sonar_t_s: np.ndarray,
+    sonar_pose: np.ndarray,
+    range_m: np.ndarray,
+    belt: SonarBeltParams,
+) -> None:
+    """The cones ``(M scans x k sensors)`` and the echo points of every scan of ``belt``."""
+    scans, sensors = range_m.shape
+    if scans == 0:
+        return
+    times = [rr.TimeColumn(TIMELINE, duration=sonar_t_s)]
+    outlines = cone_outlines(
+        sonar_pose, range_m, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad, belt.d_max_m
+    )
+    colors = np.where(np.isfinite(range_m)[..., None], CONE_ECHO_COLOR, CONE_NO_ECHO_COLOR).astype(np.uint8)
+    rec.send_columns(
+        "world/sonar/cones",
+        indexes=times,
+        columns=rr.LineStrips2D.columns(
+            strips=outlines.reshape(scans * sensors, -1, 2), colors=colors.reshape(-1, 3)
+        ).partition(np.full(scans, sensors)),
+    )
+    points, counts = echo_points(sonar_pose, range_m, belt.mount_xy, belt.mount_angle_rad)
+    rec.send_columns(
+        "world/sonar/echoes",
+        indexes=times,
+        columns=rr.Points2D.columns(positions=points, colors=np.tile(ECHO_COLOR, (len(points), 1))).partition(
+            counts
+        ),
+    )
+
+
+def record_proprioceptive(
+    rec: rr.RecordingStream, t_s: np.ndarray, wheel_ticks: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray
+) -> None:
+    """Encoder ticks ``(N, 2)``, gyro rate ``(N,)`` and specific force ``(N, 2)`` series."""
+    times = [rr.TimeColumn(TIMELINE, duration=t_s)]
+    series = {
+        "sensors/encoders/left": wheel_ticks[:, 0],
+        "sensors/encoders/right": wheel_ticks[:, 1],
+        "sensors/gyro/rate_rad_s": gyro_rad_s,
+        "sensors/accelerometer/x_m_s2": accel_m_s2[:, 0],
+        "sensors/accelerometer/y_m_s2": accel_m_s2[:, 1],
+    }
+    for entity, values in series.items():
+        rec.send_columns(entity, indexes=times, columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)))

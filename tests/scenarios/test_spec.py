@@ -1,0 +1,231 @@
+"""The scenario schema: every built-in parses, good files give the values they say, and every
+mistake is refused with one message naming the file, the key and the reason."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from robotsim.control import Route, ScriptedProfile
+from robotsim.maps import BUILTIN_MAP_NAMES
+from robotsim.robot import RobotParams
+from robotsim.sensors.imu import GyroParams
+from robotsim.sensors.sonar import SonarBeltParams
+from scenarios.errors import ScenarioError
+from scenarios.spec import STAND_STILL, builtin_names, load_scenario, parse_scenario
+
+BASE = """
+[map]
+segments = [[[0, 0], [10, 0]], [[10, 0], [10, 8]], [[10, 8], [0, 8]], [[0, 8], [0, 0]]]
+[robot]
+start_xy_m = [2.0, 2.0]
+"""
+
+
+def parse(text: str, **kwargs):
+    return parse_scenario(text, source="test.toml", **kwargs)
+
+
+def refused(text: str, **kwargs) -> ScenarioError:
+    with pytest.raises(ScenarioError) as info:
+        parse(text, **kwargs)
+    return info.value
+
+
+def test_every_builtin_scenario_parses_and_uses_its_map():
+    assert set(builtin_names()) == set(BUILTIN_MAP_NAMES)
+    for name in builtin_names():
+        spec = load_scenario(name)
+        assert spec.name == name
+        assert spec.description and "\n" not in spec.description
+        assert spec.map.name == name
+        assert isinstance(spec.plan, (Route, ScriptedProfile)) and spec.plan is not STAND_STILL
+        assert spec.run.duration_s > 0
+
+
+def test_defaults_come_from_the_simulator_classes():
+    spec = parse(BASE)
+    assert spec.run.duration_s == 60.0 and spec.run.seed == 0 and spec.run.rate_hz == 100.0
+    assert spec.robot == RobotParams()
+    belt = SonarBeltParams.default_belt(robot_radius_m=spec.robot.radius_m)
+    np.testing.assert_array_equal(spec.sensors.sonar.mount_xy, belt.mount_xy)
+    assert spec.sensors.sonar.d_max_m == belt.d_max_m == 3.0 and spec.sensors.sonar.count == 16
+    assert spec.sensors.gyro == GyroParams()
+    assert spec.plan is STAND_STILL
+    assert spec.start_pose == (2.0, 2.0, 0.0)
+
+
+def test_values_units_and_degree_keys():
+    spec = parse(
+        BASE
+        + """
+start_heading_deg = 90
+v_max_m_s = 0.8
+wheel_radius_m = 0.06
+omega_max_deg_s = 90
+[run]
+dt_s = 0.02
+seed = 7
+duration_s = 5
+[sensors.sonar]
+half_aperture_deg = 10
+d_max_m = 2.5
+[route]
+waypoints_m = [[2, 2], [8, 2], [8, 6]]
+cruise_speed_m_s = 0.5
+loop = false
+"""
+    )
+    assert spec.run.rate_hz == pytest.approx(50.0) and spec.run.dt_s == pytest.approx(0.02) and spec.run.seed == 7
+    assert spec.start_pose[2] == pytest.approx(math.pi / 2)
+    assert spec.robot.wheel_radius_m == 0.06  # "radius" is not a radian key
+    assert spec.robot.v_max_m_s == 0.8 and spec.robot.omega_max_rad_s == pytest.approx(math.pi / 2)
+    assert spec.sensors.sonar.half_aperture_rad == pytest.approx(math.radians(10))
+    assert spec.sensors.sonar.d_max_m == 2.5
+    assert isinstance(spec.plan, Route) and not spec.plan.loop and spec.plan.cruise_speed_m_s == 0.5
+    np.testing.assert_array_equal(spec.plan.waypoints_m, [[2, 2], [8, 2], [8, 6]])
+
+
+def test_profile_route():
+    spec = parse(
+        BASE
+        + """
+[[route.profile]]
+duration_s = 2
+v_m_s = 0.3
+[[route.profile]]
+duration_s = 1
+omega_deg_s = 45
+"""
+    )
+    assert isinstance(spec.plan, ScriptedProfile)
+    np.testing.assert_allclose(spec.plan.t_s, [0.0, 2.0, 3.0])
+    np.testing.assert_allclose(spec.plan.v_m_s, [0.3, 0.0, 0.0])
+    np.testing.assert_allclose(spec.plan.omega_rad_s, [0.0, math.pi / 4, 0.0])
+
+
+def test_a_custom_sonar_belt_in_degrees():
+    spec = parse(BASE + "[sensors.sonar]\nmount_xy = [[0.2, 0.0], [0.0, 0.2]]\nmount_angle_deg = [0, 90]\n")
+    assert spec.sensors.sonar.count == 2
+    np.testing.assert_allclose(spec.sensors.sonar.mount_angle_rad, [0.0, math.pi / 2])
+    error = refused(BASE + "[sensors.sonar]\nmount_xy = [[0.2, 0.0], [0.0, 0.2]]\n")
+    assert error.key.startswith("sensors.sonar") and "mount_angle_rad" in error.reason
+    error = refused(BASE + "[sensors.sonar]\ncount = 8\nmount_xy = [[0.2, 0.0]]\n")
+    assert error.key == "sensors.sonar.count" and "not both" in error.reason
+
+
+def test_map_files_are_read_relative_to_the_scenario(tmp_path):
+    (tmp_path / "maps").mkdir()
+    (tmp_path / "maps" / "room.wkt").write_text("POLYGON ((0 0, 6 0, 6 5, 0 5, 0 0))")
+    (tmp_path / "maps" / "room.geojson").write_text(
+        '{"type": "LineString", "coordinates": [[0, 0], [6, 0], [6, 5], [0, 5], [0, 0]]}'
+    )
+    robot = "[robot]\nstart_xy_m = [3, 2]\n"
+    for name in ("room.wkt", "room.geojson"):
+        scenario = tmp_path / f"s_{name}.toml"
+        scenario.write_text(f'[map]\nfile = "maps/{name}"\n' + robot)
+        spec = load_scenario(scenario)
+        assert spec.map.segments.shape == (4, 2, 2)
+        assert spec.name == scenario.stem
+
+
+BAD = {
+    "unknown key": ("[run]\ndurration_s = 5\n", "run.durration_s", "did you mean 'duration_s'"),
+    "unknown table": ("[sensor.sonar]\nd_max_m = 3\n", "sensor", "unknown key"),
+    "unknown sensor key": ("[sensors.gyro]\nbias = 1.0\n", "sensors.gyro.bias", "unknown key"),
+    "negative rate": ("[run]\nrate_hz = -100\n", "run.rate_hz", "must be > 0"),
+    "negative sonar rate": ("[sensors.sonar]\nrate_hz = -1\n", "sensors.sonar.rate_hz", "must be > 0"),
+    "NaN duration": ("[run]\nduration_s = nan\n", "run.duration_s", "finite"),
+    "infinite speed": ("[robot]\nv_max_m_s = inf\n", "robot.v_max_m_s", "finite"),
+    "d_max zero": ("[sensors.sonar]\nd_max_m = 0\n", "sensors.sonar.d_max_m", "must be > 0"),
+    "v_max negative": ("[robot]\nv_max_m_s = -1.0\n", "robot.v_max_m_s", "must be > 0"),
+    "probability above one": ("[sensors.sonar]\noutlier_prob = 1.5\n", "sensors.sonar.outlier_prob", "<= 1"),
+    "wrong type": ('[run]\nseed = "one"\n', "run.seed", "must be an integer"),
+    "float seed": ("[run]\nseed = 1.5\n", "run.seed", "must be an integer"),
+    "rate and dt": ("[run]\nrate_hz = 50\ndt_s = 0.02\n", "run.dt_s", "not both"),
+    "degrees and radians": (
+        "[sensors.sonar]\nhalf_aperture_deg = 10\nhalf_aperture_rad = 0.2\n",
+        "sensors.sonar.half_aperture_deg",
+        "not both",
+    ),
+    "estimation reserved": ("[estimation]\nfilter = 'ukf'\n", "estimation.filter", "reserved for the localisation"),
+    "profile too fast": (
+        "[[route.profile]]\nduration_s = 1\nv_m_s = 9.0\n", "route.profile[0].v_m_s", "must be <="
+    ),
+    "waypoint outside": ("[route]\nwaypoints_m = [[2, 2], [12, 2]]\n", "route.waypoints_m[1]", "outside"),
+    "run not a table": ("run = 5\n", "run", "must be a table"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_settings_are_refused_naming_file_and_key(case):
+    text, key, reason = BAD[case]
+    error = refused(_merge(BASE, text))
+    assert error.source == "test.toml"
+    assert error.key == key
+    assert reason in error.reason
+    assert str(error).startswith(f"test.toml: {key}: ")
+
+
+def _merge(base: str, extra: str) -> str:
+    """``base`` with ``extra``'s lines added (a ``[robot]`` extra goes into base's robot
+    table, top-level keys go first)."""
+    if not extra.startswith("["):
+        return extra + base
+    if extra.startswith("[robot]\n"):
+        return base + extra[len("[robot]\n") :]
+    return base + extra
+
+
+def test_empty_map_is_refused():
+    error = refused("[map]\nsegments = []\n[robot]\nstart_xy_m = [1, 1]\n")
+    assert error.key == "map.segments" and "empty" in error.reason
+
+
+def test_nan_in_a_segment_is_refused():
+    error = refused("[map]\nsegments = [[[0, 0], [1, nan]]]\n[robot]\nstart_xy_m = [1, 1]\n")
+    assert error.key == "map.segments[0][1][1]" and "finite" in error.reason
+
+
+def test_start_outside_the_outer_wall_is_refused(tmp_path):
+    (tmp_path / "room.wkt").write_text("POLYGON ((0 0, 6 0, 6 5, 0 5, 0 0))")
+    (tmp_path / "s.toml").write_text('[map]\nfile = "room.wkt"\n[robot]\nstart_xy_m = [7, 2]\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "s.toml")
+    assert info.value.key == "robot.start_xy_m" and "outside" in info.value.reason
+
+
+def test_start_overlapping_a_wall_is_refused():
+    error = refused(BASE.replace("[2.0, 2.0]", "[0.05, 2.0]"))
+    assert error.key == "robot.start_xy_m" and "overlaps wall" in error.reason
+
+
+def test_missing_start_is_refused():
+    error = refused(BASE.replace("start_xy_m = [2.0, 2.0]", ""))
+    assert error.key == "robot.start_xy_m" and "missing" in error.reason
+
+
+def test_missing_files(tmp_path):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "nope.toml")
+    assert info.value.source == str(tmp_path / "nope.toml") and "no such file" in info.value.reason
+    (tmp_path / "s.toml").write_text('[map]\nfile = "absent.wkt"\n[robot]\nstart_xy_m = [1, 1]\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "s.toml")
+    assert info.value.key == "map.file" and "no such file" in info.value.reason
+
+
+def test_invalid_toml_names_the_line():
+    error = refused("[run\nseed = 1\n")
+    assert "not valid TOML" in error.reason and "line 1" in error.reason
+
+
+def test_command_line_overrides_are_checked():
+    spec = parse(BASE)
+    assert spec.with_run(seed=3, duration_s=2.5).run.seed == 3
+    with pytest.raises(ScenarioError, match="--duration"):
+        spec.with_run(duration_s=float("nan"))
+    with pytest.raises(ScenarioError, match="--seed"):
+        spec.with_run(seed=-1)
