@@ -1,0 +1,117 @@
+"""Process and measurement models as the filters consume them (frozen, validated once).
+
+Model functions are written for a leading batch axis, so that one call evaluates all
+sigma points of all runs:
+
+- ``f(x (..., n), *args) -> (..., n)`` (additive noise), or
+  ``f(x (..., n), w (..., q), *args) -> (..., n)`` (augmented noise, paper 001);
+- ``F(x (..., n), *args) -> (..., n, n)``: the Jacobian ``df/dx`` (EKF, IEKF, MEKF);
+- ``h(x (..., n), *args) -> (..., m)`` and ``H(x (..., n), *args) -> (..., m, n)``.
+
+``*args`` are the step's extra inputs (control ``u``, ``dt_s``, the time index...), passed
+through unchanged by the EKF family. The unscented filters evaluate the models on sigma
+points ``(B, 2n + 1, n)``: an array argument whose leading axes equal the belief's batch
+shape ``(B,)`` is per-run and gets a sigma axis after them (``(B,)`` -> ``(B, 1)``,
+``(B, k)`` -> ``(B, 1, k)``); floats and other arrays pass unchanged (they are shared).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from localization.errors import EstimationError
+from localization.linalg import symmetrise, wrap_columns
+
+
+def _noise_covariance(matrix: np.ndarray, owner: str, name: str) -> np.ndarray:
+    """``matrix (..., k, k)`` as a read-only symmetric float array; refuse non-finite or non-PSD."""
+    out = np.array(matrix, dtype=float)
+    if out.ndim < 2 or out.shape[-1] != out.shape[-2] or out.shape[-1] == 0:
+        raise EstimationError(f"{owner}: {name} must have shape (..., k, k) with k >= 1, got {out.shape}")
+    if not np.isfinite(out).all():
+        raise EstimationError(f"{owner}: {name} is not finite (NaN or inf)")
+    out = symmetrise(out)
+    if np.linalg.eigvalsh(out).min() < -1e-12 * max(1.0, float(np.abs(out).max())):
+        raise EstimationError(f"{owner}: {name} is not positive semi-definite")
+    out.flags.writeable = False
+    return out
+
+
+@dataclass(frozen=True)
+class ProcessModel:
+    """``x(k+1) = f(x(k), *args) + w(k)`` (additive) or ``f(x(k), w(k), *args)`` (augmented).
+
+    Attributes:
+        f: the transition, batched (see the module docstring).
+        Q: ``(n, n)`` (additive) or ``(q, q)`` (augmented) noise covariance of ``w``, or a
+            per-run ``(B, ., .)``; symmetric positive semi-definite.
+        jacobian: ``F(x, *args) -> (..., n, n)``, needed by the EKF family (additive noise).
+        noise: ``"additive"`` or ``"augmented"`` (the UKF then draws sigma points of the
+            state augmented with ``w``, paper 001 section III-C-2).
+        noise_sqrt: computed, ``(..., q, q)`` a square root ``S S^T = Q`` (from the
+            eigen-decomposition, so a singular ``Q`` is fine) for the augmented sigma points.
+    """
+
+    f: Callable[..., np.ndarray]
+    Q: np.ndarray
+    jacobian: Callable[..., np.ndarray] | None = None
+    noise: Literal["additive", "augmented"] = "additive"
+    noise_sqrt: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not callable(self.f):
+            raise EstimationError("ProcessModel: f must be callable")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise EstimationError("ProcessModel: jacobian must be callable or None")
+        if self.noise not in ("additive", "augmented"):
+            raise EstimationError(f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}")
+        q_cov = _noise_covariance(self.Q, "ProcessModel", "Q")
+        eigenvalues, eigenvectors = np.linalg.eigh(q_cov)
+        noise_sqrt = eigenvectors * np.sqrt(np.maximum(eigenvalues, 0.0))[..., None, :]
+        noise_sqrt.flags.writeable = False
+        object.__setattr__(self, "Q", q_cov)
+        object.__setattr__(self, "noise_sqrt", noise_sqrt)
+
+
+@dataclass(frozen=True)
+class MeasurementModel:
+    """``z(k) = h(x(k), *args) + v(k)``, ``v ~ N(0, R)``.
+
+    Attributes:
+        h: the measurement function, batched.
+        R: ``(m, m)`` (or per-run ``(B, m, m)``) noise covariance, symmetric PSD.
+        jacobian: ``H(x, *args) -> (..., m, n)``, needed by the EKF family and the IUKF.
+        angle_indices: the measurement components that are angles (residuals wrapped).
+    """
+
+    h: Callable[..., np.ndarray]
+    R: np.ndarray
+    jacobian: Callable[..., np.ndarray] | None = None
+    angle_indices: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not callable(self.h):
+            raise EstimationError("MeasurementModel: h must be callable")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise EstimationError("MeasurementModel: jacobian must be callable or None")
+        R = _noise_covariance(self.R, "MeasurementModel", "R")
+        m = R.shape[-1]
+        angles = tuple(int(i) for i in self.angle_indices)
+        if any(i < 0 or i >= m for i in angles) or len(set(angles)) != len(angles):
+            raise EstimationError(
+                f"MeasurementModel: angle_indices {self.angle_indices!r} must be distinct indices in [0, {m})"
+            )
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "angle_indices", angles)
+
+    def residual(self, z: np.ndarray, z_pred: np.ndarray, step: str) -> np.ndarray:
+        """``z - z_pred`` ``(..., m)``, angle components wrapped; refuses a ``z`` of the wrong shape."""
+        if np.shape(z) != z_pred.shape:
+            raise EstimationError(
+                f"{step}: the measurement z has shape {np.shape(z)}, expected {z_pred.shape} (batch + (m,))"
+            )
+        return wrap_columns(z - z_pred, self.angle_indices)

@@ -1,0 +1,27 @@
+"""The README's "Filters and reproductions" example runs as written and does what it says."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+
+
+def test_the_filter_example_runs():
+    text = README.read_text(encoding="utf-8")
+    section = text[text.index("## Filters and reproductions") :]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    namespace: dict = {}
+    exec(compile(code, "README.md", "exec"), namespace)  # noqa: S102 - our own documentation
+    belief = namespace["belief"]
+    assert belief.mean.shape == (1000, 5) and belief.cov.shape == (1000, 5, 5)
+    # the GPS update on a linear measurement is the Kalman update of the predicted belief
+    start = namespace["Gaussian"](np.zeros(5), np.eye(5), angle_indices=(2,))
+    predicted = namespace["ukf"].predict(start, namespace["process"], 0.01).cov
+    h = np.eye(5)[:2]
+    gain = predicted @ h.T @ np.linalg.inv(h @ predicted @ h.T + 2.25 * np.eye(2))
+    np.testing.assert_allclose(belief.cov[0], predicted - gain @ h @ predicted, atol=1e-12)
+    assert belief.cov[0, 0, 0] < min(predicted[0, 0], 2.25)
