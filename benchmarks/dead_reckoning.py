@@ -1,0 +1,116 @@
+"""Speed of the 100 Hz dead reckoning: 60,000 steps (600 s) of the 2-branch batch.
+
+    python benchmarks/dead_reckoning.py [--steps 60000] [--repeats 3] [--runs 100]
+
+Data: the sensor log of 600 s on ``hall`` (the default route of the simulator's tests, seed
+0). Figures, side by side in one run (best of ``--repeats``):
+
+- the lean step (``localization.dead_reckoning``) for ``ukf`` and ``ekf`` (``iukf``/``iekf``
+  run the same code with their own sigma points / none), the batch ``(2, 8)`` = the UKF-only
+  and the fused branch on the same data, with the paper's clamp once a second (600 epochs,
+  the pipeline's pattern);
+- C's generic filter objects (``engine="generic"``) on the first ``--generic-steps``
+  samples, per step, for the ratio;
+- a Monte Carlo batch of ``--runs`` runs x 2 branches, per run-step;
+- the machine's numpy call overhead for scale.
+Target (issue 5): at most 2 s for the 60,000 steps of the 2-branch batch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import timeit
+
+import numpy as np
+
+from localization.dead_reckoning import (
+    DeadReckoning,
+    DeadReckoningSettings,
+    NominalRobot,
+    initial_belief,
+    odometry_data,
+    run_dead_reckoning,
+)
+from localization.fusion import fuse
+from robotsim.control import Route
+from robotsim.maps import builtin_map
+from robotsim.simulation import simulate
+
+ROUTE = Route([[8.5, 1.0], [8.8, 4.0], [5.0, 4.3], [4.5, 7.0], [1.0, 7.0]], loop=True)
+START = (1.0, 1.0, 0.0)
+
+
+def best_s(fn, repeats: int) -> float:
+    """Best wall time of ``fn()`` in seconds."""
+    return min(timeit.repeat(fn, number=1, repeat=repeats))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=60_000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--runs", type=int, default=100)
+    parser.add_argument("--generic-steps", type=int, default=2_000)
+    args = parser.parse_args(argv)
+
+    log = simulate(builtin_map("hall"), ROUTE, start_pose=START, duration_s=args.steps / 100.0,
+                   rng=np.random.default_rng(0))
+    robot = NominalRobot(log.robot.wheel_radius_m, log.robot.wheel_base_m, log.robot.ticks_per_rev)
+    started = time.perf_counter()
+    data = odometry_data(log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, robot)
+    prepare_s = time.perf_counter() - started
+    initial = initial_belief(START, [0.01, 0.01, 0.01])
+    steps = data.count - 1
+    truth = log.pose
+
+    def clamp(index, belief):  # a 0.4 m box around the truth, once a second
+        box = np.array([[[truth[index, 0] - 0.2, truth[index, 0] + 0.2],
+                         [truth[index, 1] - 0.2, truth[index, 1] + 0.2], [-np.pi, np.pi]]])
+        return fuse(belief, box, rows=[1])[0]
+
+    epochs = range(100, data.count, 100)
+    rows = []
+    for name in ("ukf", "ekf"):
+        settings = DeadReckoningSettings(filter=name)
+        plain = best_s(lambda: run_dead_reckoning(data, initial, settings), args.repeats)
+        fused = best_s(lambda: run_dead_reckoning(data, initial, settings, epochs, clamp), args.repeats)
+        rows.append((name, plain, fused))
+
+    short = args.generic_steps
+    generic_us = {}
+    for name in ("ukf", "ekf"):
+        settings = DeadReckoningSettings(filter=name, engine="generic")
+        generic_us[name] = best_s(lambda: DeadReckoning(data, initial, settings).run(short), 1) / short * 1e6
+
+    ticks = np.repeat(log.wheel_ticks[:, None, :], 2 * args.runs, axis=1)
+    gyro = np.repeat(log.gyro_rad_s[:, None], 2 * args.runs, axis=1)
+    accel = np.repeat(log.accel_m_s2[:, None, :], 2 * args.runs, axis=1)
+    mc_steps = min(steps, 6_000)
+    mc_data = odometry_data(ticks[: mc_steps + 1], gyro[: mc_steps + 1], accel[: mc_steps + 1], 0.01, robot)
+    mc_initial = initial_belief(START, [0.01, 0.01, 0.01], batch=2 * args.runs)
+    mc_s = best_s(lambda: run_dead_reckoning(mc_data, mc_initial), 1)
+
+    small = np.eye(8)
+    add_us = min(timeit.repeat(lambda: small + small, number=5000, repeat=5)) / 5000 * 1e6
+    chol_us = min(timeit.repeat(lambda: np.linalg.cholesky(small), number=5000, repeat=5)) / 5000 * 1e6
+
+    print(f"| figure ({steps} steps, batch of 2 branches) | wall s | us per step | target |")
+    print("|---|---|---|---|")
+    print(f"| sensor arrays to filter inputs (`odometry_data`, vectorised) | {prepare_s:.3f} | | |")
+    for name, plain, fused in rows:
+        print(f"| lean `{name}`, no fusion | {plain:.2f} | {plain / steps * 1e6:.1f} | 2 s |")
+        print(f"| lean `{name}`, clamp of row 1 once a second | {fused:.2f} | {fused / steps * 1e6:.1f} | 2 s |")
+    for name, us in generic_us.items():
+        lean_us = dict((n, p) for n, p, _ in rows)[name] / steps * 1e6
+        print(f"| generic `{name}` (C's filter objects), first {short} steps | {us * steps / 1e6:.1f} (projected) "
+              f"| {us:.0f} | ratio generic / lean {us / lean_us:.1f}x |")
+    print(f"| lean `ukf`, Monte Carlo {args.runs} runs x 2 branches, {mc_steps} steps | {mc_s:.2f} "
+          f"| {mc_s / mc_steps / (2 * args.runs) * 1e6:.2f} per run-step | |")
+    print(f"| numpy overhead: `a + a` on 8x8 | | {add_us:.2f} | |")
+    print(f"| numpy overhead: `np.linalg.cholesky` on 8x8 | | {chol_us:.2f} | |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,684 @@
+"""The robot's 100 Hz dead-reckoning filter (paper 002 section 2), nominal parameters only.
+
+Two independent sources for the speed and the yaw rate (paper 002 section 2): the wheel
+encoders (speed and yaw rate from the tick increments with the NOMINAL radius) and the IMU
+(gyro yaw rate, accelerometer forward specific force).
+
+State (``N_STATES = 8``, indices below; the pose first so that ``mean[..., :3]`` is the pose)::
+
+    s = (x_m, y_m, theta_rad, v_m_s, omega_rad_s, b_gyro_rad_s, b_accel_m_s2, d_wheel)
+
+- ``(x, y, theta)`` the pose, ``(v, omega)`` the body velocity;
+- ``b_gyro``: the gyro bias. Its turn-on value (about 0.1 deg/s) alone turns the heading by
+  6 degrees a minute, and it is observable from the encoder yaw rate;
+- ``b_accel``: the forward accelerometer bias. It is 20 milli-g (0.2 m/s^2) at turn-on, so
+  integrating the accelerometer without it is useless after a second; observable from the
+  encoder speed;
+- ``d_wheel = e_r - e_l``: the difference of the relative errors of the true wheel radii
+  (``r = r_nominal (1 + e)``). It matters: with 1 % between the wheels the encoder yaw rate is
+  off by ``v d / L`` (0.017 rad/s at 0.5 m/s, ten times the gyro bias), and without this state
+  the filter would explain that error as gyro bias and turn the heading by a degree a second.
+  It is separable from ``b_gyro`` because it scales with the speed.
+  The common radius error ``(e_r + e_l) / 2`` (a scale of the distance, 0.1 % on the default
+  robot) is not observable from these sensors: it is not modelled (the fusion corrects it).
+  The lateral specific force ``a_y = v omega`` is not used: it adds nothing about ``v`` and
+  ``omega`` that the gyro and encoders do not give, and would need its own bias state.
+
+How each sensor enters (the sample ``k`` is at ``t_k = k dt``; the log's row ``k`` of
+ticks counts the turn from ``k - 1`` to ``k``):
+
+- The accelerometer is an INPUT of the speed, ``v(k) = v(k-1) + dt (a(k) - b_accel)`` with
+  ``a(k)`` the mean of the readings at ``k - 1`` and ``k``: it measures the derivative of a
+  state, and using it as an input spares an acceleration state with a guessed jerk noise.
+  Its white noise is process noise of ``v``.
+- The pose moves along the unicycle with the mid-step heading (second-order in ``dt``)::
+
+      x(k) = x + dt v cos(theta + dt omega / 2),  y(k) = y + dt v sin(theta + dt omega / 2)
+      theta(k) = theta + dt omega,  omega(k) = omega + w_omega  (random walk, the yaw
+      acceleration as noise), biases and d_wheel: random walks / constant.
+
+- The encoders and the gyro are MEASUREMENTS, ``z(k) = (v_enc, omega_enc, gyro)``::
+
+      v_enc     = v - (L / 4) omega d_wheel           (first order in the radius errors)
+      omega_enc = omega - (v / L) d_wheel
+      gyro      = omega + b_gyro
+
+  The products ``omega d_wheel`` and ``v d_wheel`` are taken with the MEASURED gyro rate and
+  encoder speed in place of ``omega`` and ``v`` (their errors times ``d`` ~ 1e-4 rad/s are
+  far below the encoder noise), so the measurement is linear in the state with a matrix
+  ``H(k)`` that changes with the data. For a linear ``h`` the unscented update IS the Kalman
+  update (the unscented transform of a linear map is exact), so every filter of the family
+  updates in closed form, and the iterated updates (IEKF, IUKF) converge at their first
+  iteration: ``iekf`` equals ``ekf`` and ``iukf`` equals ``ukf`` with its own sigma points.
+
+Noise: encoder quantisation gives each wheel's increment an error that is the difference of
+two uniform tick fractions, standard deviation ``1 / sqrt(6)`` tick (treated as white: it is
+in fact anti-correlated, so the filter is conservative about it); the IMU white noise has the
+per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
+
+Speed: C's generic :class:`~localization.ukf.UnscentedKalmanFilter`, step by step, takes
+about 300 us a step (18 s for 600 s at 100 Hz, nine times the budget; ``BENCHMARKS.md``).
+:class:`DeadReckoning` therefore runs a lean step specialised to this model, still the same
+filter: the unscented prediction with the same sigma points and moments as the generic one,
+and the closed-form update that equals the unscented one for the linear ``h``
+(``tests/localization/test_dead_reckoning.py`` checks both against C's filters). Its
+heading is kept unwrapped inside the loop (the model is periodic in it) and wrapped on
+output; sigma-point heading offsets are wrapped as in the generic filter when the points
+are wide (``gamma >= 0.01``, e.g. the IUKF's kappa points), and not for the scaled points
+(``gamma ~ 3e-3``), where that needs ``sigma_theta < pi / gamma`` (1000 rad; checked).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
+from localization.errors import EstimationError
+from localization.gaussian import Gaussian
+from localization.iukf import IteratedUnscentedKalmanFilter
+from localization.linalg import INV_TWO_PI, TWO_PI, wrap_angle
+from localization.models import MeasurementModel, ProcessModel
+from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
+from localization.ukf import UnscentedKalmanFilter
+
+X, Y, THETA, V, OMEGA, B_GYRO, B_ACCEL, D_WHEEL = range(8)
+N_STATES = 8
+STATE_NAMES = ("x_m", "y_m", "theta_rad", "v_m_s", "omega_rad_s", "b_gyro_rad_s", "b_accel_m_s2", "d_wheel")
+ANGLE_INDICES = (THETA,)
+FILTERS = ("ukf", "iukf", "ekf", "iekf")
+_G_M_S2 = 9.80665
+_WRAP_GAMMA = 0.01  # sigma-point spread from which the lean step wraps heading offsets
+
+
+def _positive(owner: str, **values) -> None:
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+            raise EstimationError(f"{owner}: {name} must be a positive finite number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class NominalRobot:
+    """What the estimator knows of the robot (never the true radii).
+
+    Attributes:
+        wheel_radius_m: nominal radius of both wheels.
+        wheel_base_m: distance between the wheel contact points ``L``.
+        ticks_per_rev: encoder ticks per wheel revolution.
+    """
+
+    wheel_radius_m: float
+    wheel_base_m: float
+    ticks_per_rev: int
+
+    def __post_init__(self) -> None:
+        _positive("NominalRobot", wheel_radius_m=self.wheel_radius_m, wheel_base_m=self.wheel_base_m,
+                  ticks_per_rev=self.ticks_per_rev)
+        if int(self.ticks_per_rev) != self.ticks_per_rev:
+            raise EstimationError(f"NominalRobot: ticks_per_rev must be an integer, got {self.ticks_per_rev!r}")
+
+    @property
+    def metres_per_tick(self) -> float:
+        """Wheel travel of one tick with the nominal radius, m."""
+        return 2.0 * math.pi * self.wheel_radius_m / self.ticks_per_rev
+
+
+@dataclass(frozen=True)
+class DeadReckoningNoise:
+    """The filter's noise model (defaults: the simulator's default low-cost sensors).
+
+    Attributes:
+        tick_std: standard deviation of one wheel's tick increment per sample, ticks
+            (quantisation: ``1 / sqrt(6)``; add slip here if the wheels slip).
+        gyro_noise_density_rad_s_sqrt_hz: gyro white noise density.
+        gyro_bias_std_rad_s: prior standard deviation of the gyro bias (turn-on).
+        gyro_bias_random_walk_rad_s_sqrt_s: gyro bias random walk.
+        accel_noise_density_m_s2_sqrt_hz: forward accelerometer white noise density.
+        accel_bias_std_m_s2: prior standard deviation of the accelerometer bias (turn-on).
+        accel_bias_random_walk_m_s2_sqrt_s: accelerometer bias random walk.
+        wheel_radius_rel_std: prior standard deviation of each wheel's relative radius error
+            (``d_wheel`` gets ``sqrt(2)`` times it).
+        yaw_accel_std_rad_s2: standard deviation of the yaw acceleration driving ``omega``
+            (the robot's ``alpha_max`` is a safe value).
+        position_std_m_sqrt_s, heading_std_rad_sqrt_s: model error of the pose kinematics
+            (small; keeps the pose covariance positive definite).
+    """
+
+    tick_std: float = 1.0 / math.sqrt(6.0)
+    gyro_noise_density_rad_s_sqrt_hz: float = math.radians(0.005)
+    gyro_bias_std_rad_s: float = math.radians(0.1)
+    gyro_bias_random_walk_rad_s_sqrt_s: float = math.radians(0.002)
+    accel_noise_density_m_s2_sqrt_hz: float = 400e-6 * _G_M_S2
+    accel_bias_std_m_s2: float = 20e-3 * _G_M_S2
+    accel_bias_random_walk_m_s2_sqrt_s: float = 0.05e-3 * _G_M_S2
+    wheel_radius_rel_std: float = 0.01
+    yaw_accel_std_rad_s2: float = 2.0 * 0.5 / 0.30
+    position_std_m_sqrt_s: float = 1e-4
+    heading_std_rad_sqrt_s: float = 1e-4
+
+    def __post_init__(self) -> None:
+        _positive("DeadReckoningNoise", **{name: getattr(self, name) for name in self.__dataclass_fields__})
+
+    def process_cov(self, dt_s: float) -> np.ndarray:
+        """``Q (8, 8)``, diagonal, of one step of ``dt_s`` seconds."""
+        accel_std = self.accel_noise_density_m_s2_sqrt_hz / math.sqrt(dt_s)  # per sample
+        return np.diag([
+            self.position_std_m_sqrt_s**2 * dt_s,
+            self.position_std_m_sqrt_s**2 * dt_s,
+            self.heading_std_rad_sqrt_s**2 * dt_s,
+            (accel_std * dt_s) ** 2,
+            (self.yaw_accel_std_rad_s2 * dt_s) ** 2,
+            self.gyro_bias_random_walk_rad_s_sqrt_s**2 * dt_s,
+            self.accel_bias_random_walk_m_s2_sqrt_s**2 * dt_s,
+            1e-12 * dt_s,  # the radii are constant; a trace of noise keeps the filter awake
+        ])
+
+    def measurement_cov(self, robot: NominalRobot, dt_s: float) -> np.ndarray:
+        """``R (3, 3)`` of ``(v_enc, omega_enc, gyro)``: the wheels' errors are independent,
+        so the speed (their mean) and the yaw rate (their difference) are uncorrelated."""
+        wheel_std = self.tick_std * robot.metres_per_tick / dt_s  # one wheel's rim speed, m/s
+        gyro_std = self.gyro_noise_density_rad_s_sqrt_hz / math.sqrt(dt_s)
+        return np.diag([0.5 * wheel_std**2, 2.0 * wheel_std**2 / robot.wheel_base_m**2, gyro_std**2])
+
+    def prior_std(self) -> np.ndarray:
+        """``(5,)`` prior standard deviations of the sensor states
+        ``(b_gyro, b_accel, d_wheel)`` preceded by those of ``(v, omega)`` at rest (small)."""
+        return np.array([1e-3, 1e-3, self.gyro_bias_std_rad_s, self.accel_bias_std_m_s2,
+                         math.sqrt(2.0) * self.wheel_radius_rel_std])
+
+
+def initial_belief(pose, pose_std, noise: DeadReckoningNoise = DeadReckoningNoise(), batch: int | None = 2) -> Gaussian:
+    """The starting belief: the robot at rest at ``pose (3,)`` with standard deviations
+    ``pose_std (3,)`` (m, m, rad), sensor states at their priors; ``batch`` copies (default 2:
+    the UKF-only and the fused branch), ``None`` for one unbatched belief."""
+    pose = np.asarray(pose, dtype=float)
+    pose_std = np.asarray(pose_std, dtype=float)
+    if pose.shape != (3,) or pose_std.shape != (3,) or not (np.isfinite(pose).all() and (pose_std > 0).all()):
+        raise EstimationError(f"initial_belief: pose and pose_std must be finite (3,) arrays, pose_std > 0; "
+                              f"got {pose!r}, {pose_std!r}")
+    mean = np.concatenate([pose, np.zeros(5)])
+    cov = np.diag(np.concatenate([pose_std, noise.prior_std()]) ** 2)
+    if batch is not None:
+        mean, cov = np.broadcast_to(mean, (batch, N_STATES)), np.broadcast_to(cov, (batch, N_STATES, N_STATES))
+    return Gaussian(mean, cov, ANGLE_INDICES)
+
+
+# --------------------------------------------------------------------------- the models
+
+
+def transition(state: np.ndarray, accel_m_s2, dt_s: float) -> np.ndarray:
+    """``f(s) (..., 8)``: one step of ``dt_s`` with the forward accelerometer input
+    ``accel_m_s2`` (broadcast against ``state[..., 0]``); see the module docstring."""
+    theta, v, omega = state[..., THETA], state[..., V], state[..., OMEGA]
+    heading = theta + 0.5 * dt_s * omega
+    out = state.copy()
+    out[..., X] += dt_s * v * np.cos(heading)
+    out[..., Y] += dt_s * v * np.sin(heading)
+    out[..., THETA] += dt_s * omega
+    out[..., V] += dt_s * (accel_m_s2 - state[..., B_ACCEL])
+    return out
+
+
+def transition_jacobian(state: np.ndarray, accel_m_s2, dt_s: float) -> np.ndarray:
+    """``df/ds (..., 8, 8)``."""
+    theta, v, omega = state[..., THETA], state[..., V], state[..., OMEGA]
+    heading = theta + 0.5 * dt_s * omega
+    cos, sin = dt_s * np.cos(heading), dt_s * np.sin(heading)
+    jac = np.broadcast_to(_linear_part(dt_s), state.shape[:-1] + (N_STATES, N_STATES)).copy()
+    jac[..., X, THETA] = -v * sin
+    jac[..., X, V] = cos
+    jac[..., X, OMEGA] = -0.5 * dt_s * v * sin
+    jac[..., Y, THETA] = v * cos
+    jac[..., Y, V] = sin
+    jac[..., Y, OMEGA] = 0.5 * dt_s * v * cos
+    return jac
+
+
+def _linear_part(dt_s: float) -> np.ndarray:
+    """``A (8, 8)``: the transition without the ``x, y`` motion (identity on ``x, y``)."""
+    a = np.eye(N_STATES)
+    a[THETA, OMEGA] = dt_s
+    a[V, B_ACCEL] = -dt_s
+    return a
+
+
+def measure(state: np.ndarray, h_matrix: np.ndarray) -> np.ndarray:
+    """``h(s) = H s`` ``(..., 3)`` = predicted ``(v_enc, omega_enc, gyro)``; ``h_matrix (..., 3, 8)``."""
+    return (h_matrix @ state[..., None])[..., 0]
+
+
+def measure_jacobian(state: np.ndarray, h_matrix: np.ndarray) -> np.ndarray:
+    """``dh/ds = H``, broadcast to ``(..., 3, 8)``."""
+    return np.broadcast_to(h_matrix, np.broadcast_shapes(state.shape[:-1] + (1, 1), h_matrix.shape))
+
+
+@dataclass(frozen=True, eq=False)
+class OdometryData:
+    """The sensor arrays turned into the filter's per-sample inputs (one vectorised pass).
+
+    Attributes (``N`` samples; a batch axis ``B`` after the time axis when the runs have
+    their own data, none when all batch rows share the data):
+        dt_s: sample period.
+        accel_input_m_s2: ``(N,)`` or ``(N, B)`` forward accelerometer input of the step
+            ending at ``k`` (mean of readings ``k - 1`` and ``k``; row 0 unused).
+        z: ``(N, [B,] 3)`` measurements ``(v_enc_m_s, omega_enc_rad_s, gyro_rad_s)``.
+        h_matrix: ``(N, [B,] 3, 8)`` the measurement matrices ``H(k)``.
+        R: ``(3, 3)`` measurement noise; Q: ``(8, 8)`` process noise per step.
+    """
+
+    dt_s: float
+    accel_input_m_s2: np.ndarray
+    z: np.ndarray
+    h_matrix: np.ndarray
+    R: np.ndarray
+    Q: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """Number of samples ``N``."""
+        return self.z.shape[0]
+
+    @property
+    def per_run(self) -> bool:
+        """True when the data carry a batch axis ``(N, B, ...)``."""
+        return self.z.ndim == 3
+
+    def process_model(self) -> ProcessModel:
+        """The model as C's filters consume it (additive noise, with its Jacobian)."""
+        return ProcessModel(transition, self.Q, jacobian=transition_jacobian)
+
+    def measurement_model(self) -> MeasurementModel:
+        """``z = H(k) s + v``; the step passes ``H(k)`` as the argument of ``h``."""
+        return MeasurementModel(measure, self.R, jacobian=measure_jacobian)
+
+
+def odometry_data(ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobot,
+                  noise: DeadReckoningNoise = DeadReckoningNoise()) -> OdometryData:
+    """The per-sample inputs from the raw sensor arrays.
+
+    Args:
+        ticks: ``(N, 2)`` or ``(N, B, 2)`` integer tick increments (left, right); row 0 unused.
+        gyro_rad_s: ``(N,)`` or ``(N, B)`` yaw-rate readings.
+        accel_m_s2: ``(N, 2)`` or ``(N, B, 2)`` specific force (body x, y); only x is used.
+        dt_s: sample period (``1 / rate_hz``).
+        robot: the nominal parameters; noise: the noise model.
+
+    Raises:
+        EstimationError: shapes that do not agree, a non-finite reading (naming the array and
+            the first bad sample), a bad ``dt_s``.
+    """
+    _positive("odometry_data", dt_s=dt_s)
+    ticks = np.asarray(ticks)
+    gyro = np.asarray(gyro_rad_s, dtype=float)
+    accel = np.asarray(accel_m_s2, dtype=float)
+    if ticks.ndim not in (2, 3) or ticks.shape[-1] != 2 or ticks.shape[0] < 1:
+        raise EstimationError(f"odometry_data: ticks must have shape (N, 2) or (N, B, 2), got {ticks.shape}")
+    lead = ticks.shape[:-1]
+    if gyro.shape != lead or accel.shape != lead + (2,):
+        raise EstimationError(
+            f"odometry_data: gyro {gyro.shape} and accel {accel.shape} must be {lead} and {lead + (2,)} "
+            f"to match ticks {ticks.shape}"
+        )
+    for name, values in (("ticks", ticks), ("gyro_rad_s", gyro), ("accel_m_s2", accel)):
+        bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+        if bad.any():
+            raise EstimationError(f"odometry_data: {name} is not finite at sample {int(np.argmax(bad))}")
+    rim = ticks.astype(float) * (robot.metres_per_tick / dt_s)  # wheel rim speeds, m/s
+    v_enc = 0.5 * (rim[..., 0] + rim[..., 1])
+    omega_enc = (rim[..., 1] - rim[..., 0]) / robot.wheel_base_m
+    z = np.stack([v_enc, omega_enc, gyro], axis=-1)
+    h_matrix = np.zeros(lead + (3, N_STATES))
+    h_matrix[..., 0, V] = 1.0
+    h_matrix[..., 0, D_WHEEL] = -0.25 * robot.wheel_base_m * gyro
+    h_matrix[..., 1, OMEGA] = 1.0
+    h_matrix[..., 1, D_WHEEL] = -v_enc / robot.wheel_base_m
+    h_matrix[..., 2, OMEGA] = 1.0
+    h_matrix[..., 2, B_GYRO] = 1.0
+    forward = accel[..., 0]
+    accel_input = forward.copy()
+    accel_input[1:] = 0.5 * (forward[1:] + forward[:-1])
+    return OdometryData(dt_s, accel_input, z, h_matrix, noise.measurement_cov(robot, dt_s), noise.process_cov(dt_s))
+
+
+# --------------------------------------------------------------------------- the filters
+
+
+@dataclass(frozen=True)
+class DeadReckoningSettings:
+    """Which filter runs the dead reckoning.
+
+    Attributes:
+        filter: ``"ukf"``, ``"iukf"``, ``"ekf"`` or ``"iekf"`` (the scenario's
+            ``estimation.filter``).
+        points: sigma points of the unscented filters; ``None`` takes each filter's default
+            (scaled points ``alpha = 1e-3`` for the UKF, kappa points for the IUKF, paper 000).
+        engine: ``"lean"`` (the specialised step, default) or ``"generic"`` (C's filter objects
+            step by step: the reference, about ten times slower).
+    """
+
+    filter: Literal["ukf", "iukf", "ekf", "iekf"] = "ukf"
+    points: SigmaPointScheme | None = None
+    engine: Literal["lean", "generic"] = "lean"
+
+    def __post_init__(self) -> None:
+        if self.filter not in FILTERS:
+            raise EstimationError(f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}")
+        if self.engine not in ("lean", "generic"):
+            raise EstimationError(f"DeadReckoningSettings: engine must be 'lean' or 'generic', got {self.engine!r}")
+
+    @property
+    def unscented(self) -> bool:
+        """True for the UKF and IUKF (unscented prediction)."""
+        return self.filter in ("ukf", "iukf")
+
+    def sigma_points(self) -> SigmaPointScheme:
+        """The sigma-point scheme in use (unscented filters)."""
+        if self.points is not None:
+            return self.points
+        return KappaSigmaPoints() if self.filter == "iukf" else ScaledSigmaPoints(alpha=1e-3)
+
+    def generic_filter(self):
+        """C's filter object for this setting."""
+        if self.filter == "ukf":
+            return UnscentedKalmanFilter(points=self.sigma_points())
+        if self.filter == "iukf":
+            return IteratedUnscentedKalmanFilter(points=self.sigma_points())
+        return ExtendedKalmanFilter() if self.filter == "ekf" else IteratedExtendedKalmanFilter()
+
+
+@dataclass(frozen=True, eq=False)
+class DeadReckoningHistory:
+    """What a run recorded, rows ``0..count-1`` (row ``k`` = the belief at sample ``k``
+    after its update and after any replacement at ``k``).
+
+    Attributes:
+        mean: ``(count, B, 8)`` state means (heading wrapped).
+        cov: ``(count, B, c, c)`` the covariance of the first ``c`` states: ``c = 3`` (the
+            pose, default) or ``c = 8`` (the whole state, ``record_full_cov=True``).
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def pose_cov(self) -> np.ndarray:
+        """``(count, B, 3, 3)`` covariance of ``(x, y, theta)``."""
+        return self.cov[..., :3, :3]
+
+
+class DeadReckoning:
+    """Runs the filter over whole sensor arrays, one batched belief ``(B, 8)``.
+
+    Typical pipeline use: row 0 the UKF-only branch, row 1 the fused one, on the same data::
+
+        dr = DeadReckoning(data, initial_belief(start, std))
+        for k in epochs:
+            belief = dr.run(k)                           # advance to sample k
+            fused, report = fuse(belief, boxes, labels, rows=[1])
+            dr.replace(fused)                            # or leave it
+        dr.run(data.count - 1)
+        history = dr.history                         # preallocated, filled in place
+
+    Args:
+        data: from :func:`odometry_data`; initial: the belief ``(B, 8)`` at sample 0.
+        settings: the filter.
+        record_full_cov: record the whole ``(8, 8)`` covariance per sample, not only the
+            pose block (memory: ``N B 512`` bytes).
+
+    Attributes:
+        index: the sample of the current belief (starts at 0, the initial belief).
+    """
+
+    def __init__(self, data: OdometryData, initial: Gaussian,
+                 settings: DeadReckoningSettings = DeadReckoningSettings(), record_full_cov: bool = False) -> None:
+        if not isinstance(initial, Gaussian) or initial.mean.ndim != 2 or initial.dim != N_STATES:
+            raise EstimationError(f"DeadReckoning: initial must be a batched Gaussian (B, {N_STATES})")
+        if initial.angle_indices != ANGLE_INDICES:
+            raise EstimationError(f"DeadReckoning: initial must declare angle_indices {ANGLE_INDICES}")
+        batch = initial.mean.shape[0]
+        if data.per_run and data.z.shape[1] != batch:
+            raise EstimationError(f"DeadReckoning: the data hold {data.z.shape[1]} runs, the belief {batch}")
+        self.data = data
+        self.settings = settings
+        self.index = 0
+        count = data.count
+        self._mean_hist = np.empty((count, batch, N_STATES))
+        recorded = N_STATES if record_full_cov else 3
+        self._cov_hist = np.empty((count, batch, recorded, recorded))
+        self._mean = np.array(initial.mean)
+        self._cov = np.array(initial.cov)
+        self._record(0)
+        if settings.engine == "lean":
+            self._lean = _LeanStep(data, settings, batch)
+        else:
+            self._generic = settings.generic_filter()
+            self._process = data.process_model()
+            self._measurement = data.measurement_model()
+
+    @property
+    def belief(self) -> Gaussian:
+        """The current belief (a copy; heading wrapped)."""
+        mean = self._mean.copy()
+        mean[:, THETA] = wrap_angle(mean[:, THETA])
+        return Gaussian.trusted(mean, 0.5 * (self._cov + self._cov.mT), ANGLE_INDICES)
+
+    @property
+    def history(self) -> DeadReckoningHistory:
+        """Rows ``0..index`` of the recorded history (views of the preallocated arrays)."""
+        end = self.index + 1
+        return DeadReckoningHistory(self._mean_hist[:end], self._cov_hist[:end])
+
+    def replace(self, belief: Gaussian) -> None:
+        """Replace the current belief (e.g. by the fused one) and re-record the current row.
+
+        Raises:
+            EstimationError: a belief of another shape or with non-finite values.
+        """
+        if (not isinstance(belief, Gaussian) or belief.mean.shape != self._mean.shape
+                or belief.angle_indices != ANGLE_INDICES):
+            raise EstimationError(f"DeadReckoning.replace: the belief must be a Gaussian {self._mean.shape}")
+        if not (np.isfinite(belief.mean).all() and np.isfinite(belief.cov).all()):
+            raise EstimationError("DeadReckoning.replace: the belief is not finite")
+        self._mean = np.array(belief.mean)
+        self._cov = np.array(belief.cov)
+        self._record(self.index)
+
+    def run(self, until_index: int) -> Gaussian:
+        """Advance to sample ``until_index`` (inclusive) and return the belief there.
+
+        Raises:
+            EstimationError: an index behind the current one or past the data; a heading
+                too uncertain for the lean step; a covariance that stops being positive
+                definite (from the Cholesky factorisation).
+        """
+        if not (self.index <= until_index < self.data.count):
+            raise EstimationError(
+                f"DeadReckoning.run: until_index must be in [{self.index}, {self.data.count - 1}], got {until_index}"
+            )
+        start = self.index + 1
+        if until_index >= start:
+            if self.settings.engine == "lean":
+                self._mean, self._cov = self._lean.run(
+                    self._mean, self._cov, start, until_index + 1,
+                    self._mean_hist, self._cov_hist,
+                )
+                self._mean_hist[start : until_index + 1, :, THETA] = wrap_angle(
+                    self._mean_hist[start : until_index + 1, :, THETA]
+                )
+            else:
+                self._run_generic(start, until_index + 1)
+            self.index = until_index
+        return self.belief
+
+    def _run_generic(self, start: int, stop: int) -> None:
+        data, filt = self.data, self._generic
+        batch = self._mean.shape[0]
+        belief = Gaussian.trusted(self._mean, self._cov, ANGLE_INDICES)
+        for k in range(start, stop):
+            accel = data.accel_input_m_s2[k]
+            accel = accel if data.per_run else np.full(batch, accel)
+            z = np.broadcast_to(data.z[k], (batch, 3))
+            h = np.broadcast_to(data.h_matrix[k], (batch, 3, N_STATES))
+            belief = filt.predict(belief, self._process, accel, data.dt_s)
+            belief = filt.update(belief, z, self._measurement, h)
+            self._mean, self._cov = belief.mean, belief.cov
+            self._record(k)
+
+    def _record(self, k: int) -> None:
+        self._mean_hist[k] = self._mean
+        self._mean_hist[k, :, THETA] = wrap_angle(self._mean[:, THETA])
+        recorded = self._cov_hist.shape[-1]
+        self._cov_hist[k] = self._cov[:, :recorded, :recorded]
+
+
+class _LeanStep:
+    """The specialised step: unscented (or linearised) prediction, closed-form update.
+
+    The arithmetic is that of C's filters on :meth:`OdometryData.process_model` and
+    :meth:`OdometryData.measurement_model`, rearranged to cut the numpy calls (about 30 a
+    step for the whole batch) with the constants built once:
+
+    - sigma points ``X = x + S L^T`` with the constant ``S = [0; gamma I; -gamma I]``;
+    - the linear part of ``f`` as one product ``X A^T``; the motion of ``x, y`` as
+      ``dt v (cos, sin)(theta + dt omega / 2)``, both from one ``cos`` of
+      ``(heading, heading - pi/2)``;
+    - the moments about ``X_0`` of :mod:`localization.sigma_points` in one product: the
+      deviations ``D_i`` and the shift ``d`` stacked as rows with the weights
+      ``(W_i, ..., c0 - 1)`` and the rows of ``L_Q^T`` (``Q = L_Q L_Q^T``) with weight 1, so
+      ``P- = M^T diag(w) M`` is one product;
+    - the updated covariance is symmetrised only for the EKF: the unscented prediction reads
+      the lower triangle (Cholesky) and rebuilds the covariance every step, so rounding
+      asymmetry cannot build up; beliefs handed out are symmetrised.
+    """
+
+    def __init__(self, data: OdometryData, settings: DeadReckoningSettings, batch: int) -> None:
+        self.data = data
+        self.unscented = settings.unscented
+        self.linear_t = _linear_part(data.dt_s).T.copy()
+        # points @ motion_map = (heading, heading, dt v), heading = theta + dt omega / 2
+        self.motion_map = np.zeros((N_STATES, 3))
+        self.motion_map[THETA, :2] = 1.0
+        self.motion_map[OMEGA, :2] = 0.5 * data.dt_s
+        self.motion_map[V, 2] = data.dt_s
+        if self.unscented:
+            weights = settings.sigma_points().weights(N_STATES)
+            self.gamma = weights.gamma
+            eye = np.eye(N_STATES)
+            self.spread = weights.gamma * np.vstack([np.zeros((1, N_STATES)), eye, -eye])  # (2n+1, n)
+            self.dev_weights = np.asarray(weights.deviation_weights)
+            # rows of the moment product: D_1..D_2n (W_i), d (c0 - 1), L_Q^T (1): P- in one product
+            self.moment_weights = np.concatenate([weights.deviation_weights, [weights.c0 - 1.0], np.ones(N_STATES)])
+            self.quarter_turn = np.array([0.0, 0.5 * math.pi])  # cos(h - pi/2) = sin(h)
+            self.moments = np.empty((batch, 3 * N_STATES + 1, N_STATES))
+            self.moments[:, 2 * N_STATES + 1 :] = np.linalg.cholesky(data.Q).T  # rows r: sum r r^T = Q
+            # wide points (kappa: gamma = sqrt 3) can put heading offsets past pi: wrap them as
+            # the generic filter does; the tiny scaled points (gamma ~ 3e-3) never do (checked)
+            self.wrap_offsets = weights.gamma >= _WRAP_GAMMA
+        else:
+            self.jac = np.broadcast_to(_linear_part(data.dt_s), (batch, N_STATES, N_STATES)).copy()
+        # per-step arrays, indexed by k in the loop, shaped to broadcast against the batch
+        count = data.count
+        self.drive = (data.dt_s * data.accel_input_m_s2).reshape(count, -1, 1)  # (N, B|1, 1)
+        self.z = data.z.reshape(count, -1, 1, 3)  # (N, B|1, 1, 3)
+        self.h = data.h_matrix.reshape(count, -1, 3, N_STATES)
+        self.h_t = np.ascontiguousarray(self.h.swapaxes(-1, -2))
+
+    def run(self, mean, cov, start, stop, mean_hist, cov_hist):
+        """Steps ``start..stop-1``; records each into the history arrays; returns the belief."""
+        dt = self.data.dt_s
+        half_dt = 0.5 * dt
+        q_cov, r_cov = self.data.Q, self.data.R
+        linear_t = self.linear_t
+        drive, z_all, h_all, ht_all = self.drive, self.z, self.h, self.h_t
+        cholesky, solve, cos = np.linalg.cholesky, np.linalg.solve, np.cos
+        recorded = cov_hist.shape[-1]
+        if self.unscented:
+            spread, dev_weights, moment_weights = self.spread, self.dev_weights, self.moment_weights
+            quarter_turn, moments = self.quarter_turn, self.moments
+            wrap_offsets = self.wrap_offsets
+            two_n = 2 * N_STATES
+        else:
+            jac = self.jac
+            turns = np.array([0.0, 0.5 * math.pi, -0.5 * math.pi, 0.0])
+        motion_map, unscented = self.motion_map, self.unscented
+        k = start
+        try:
+            for k in range(start, stop):
+                if unscented:
+                    # prediction: the unscented transform (paper 001 eq. 25-27), moments about X_0
+                    points = mean[:, None, :] + spread @ cholesky(cov).mT  # (B, 2n+1, n)
+                    images = points @ linear_t
+                    images[..., V] += drive[k]
+                    motion = points @ motion_map
+                    images[..., :2] += motion[..., 2:] * cos(motion[..., :2] - quarter_turn)  # dt v (cos, sin)
+                    np.subtract(images[:, 1:], images[:, :1], out=moments[:, :two_n])
+                    if wrap_offsets:
+                        offsets = moments[:, :two_n, THETA]
+                        offsets -= TWO_PI * np.round(offsets * INV_TWO_PI)
+                    shift = dev_weights @ moments[:, :two_n]  # d = sum W_i D_i
+                    moments[:, two_n] = shift
+                    mean = images[:, 0] + shift
+                    cov = (moments.mT * moment_weights) @ moments  # sum W_i D_i D_i^T + (c0 - 1) d d^T + Q
+                else:
+                    # prediction: x- = f(x), P- = F P F^T + Q
+                    motion = mean @ motion_map  # (heading, heading, dt v)
+                    trig = cos(motion[:, :1] - turns)  # (cos, sin, -sin, cos) of the heading
+                    dt_v = motion[:, 2:]
+                    jac[:, :2, THETA] = dt_v * trig[:, 2:]  # d(x, y)/d theta = dt v (-sin, cos)
+                    jac[:, :2, V] = dt * trig[:, :2]
+                    jac[:, :2, OMEGA] = half_dt * jac[:, :2, THETA]
+                    mean = mean @ linear_t
+                    mean[:, V] += drive[k][:, 0]
+                    mean[:, :2] += dt_v * trig[:, :2]
+                    cov = jac @ cov @ jac.mT + q_cov
+                # update, linear h: S = H P H^T + R, K^T = S^-1 H P, x += (z - H x) K^T, P -= P H^T K^T
+                cross = cov @ ht_all[k]
+                gain_t = solve(h_all[k] @ cross + r_cov, cross.mT)
+                innovation = z_all[k] - mean[:, None, :] @ ht_all[k]
+                mean = mean + (innovation @ gain_t)[:, 0]
+                cov = cov - cross @ gain_t
+                if not unscented:  # the unscented prediction rebuilds P from its lower triangle
+                    cov += cov.mT  # symmetrised: (P + P^T) / 2
+                    cov *= 0.5
+                mean_hist[k] = mean
+                cov_hist[k] = cov[:, :recorded, :recorded]
+        except np.linalg.LinAlgError as exc:
+            raise EstimationError(
+                f"dead reckoning: the covariance at sample {k} is not positive definite ({exc})"
+            ) from exc
+        too_wide = unscented and not self.wrap_offsets and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2
+        if too_wide:
+            raise EstimationError(
+                "dead reckoning: the heading is too uncertain for the lean step (gamma * sigma_theta >= pi); "
+                "use engine='generic' or smaller sigma-point spread"
+            )
+        return mean, cov
+
+
+def run_dead_reckoning(data: OdometryData, initial: Gaussian,
+                       settings: DeadReckoningSettings = DeadReckoningSettings(),
+                       epochs=(), on_epoch=None, record_full_cov: bool = False) -> DeadReckoningHistory:
+    """Run the filter over all samples of ``data``.
+
+    Args:
+        data: from :func:`odometry_data`; initial: the belief ``(B, 8)`` at sample 0.
+        settings: the filter.
+        epochs: increasing sample indices where ``on_epoch(index, belief) -> Gaussian | None``
+            is called; a returned belief replaces the current one (the fusion).
+        record_full_cov: see :class:`DeadReckoning`.
+
+    Returns:
+        The history of all ``N`` samples.
+    """
+    runner = DeadReckoning(data, initial, settings, record_full_cov)
+    for index in epochs:
+        belief = runner.run(int(index))
+        if on_epoch is not None:
+            replacement = on_epoch(int(index), belief)
+            if replacement is not None:
+                runner.replace(replacement)
+    runner.run(data.count - 1)
+    return runner.history

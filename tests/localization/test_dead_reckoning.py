@@ -1,0 +1,276 @@
+"""The dead-reckoning filter on simulated logs: closed-form motions, tracking with a drift
+that grows with time, covariance consistency (NEES), the lean step against C's filters,
+batched against looped, and its refusals."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from localization.dead_reckoning import (
+    ANGLE_INDICES,
+    D_WHEEL,
+    N_STATES,
+    THETA,
+    DeadReckoning,
+    DeadReckoningNoise,
+    DeadReckoningSettings,
+    NominalRobot,
+    initial_belief,
+    odometry_data,
+    run_dead_reckoning,
+    transition,
+    transition_jacobian,
+)
+from localization.errors import EstimationError
+from localization.gaussian import Gaussian
+from robotsim.control import Route, ScriptedProfile
+from robotsim.maps import builtin_map
+from robotsim.robot import RobotParams
+from robotsim.sensors.imu import AccelerometerParams, GyroParams
+from robotsim.simulation import SensorSuite, simulate
+
+HALL = builtin_map("hall")
+ROUTE = Route([[8.5, 1.0], [8.8, 4.0], [5.0, 4.3], [4.5, 7.0], [1.0, 7.0]], loop=True)
+START = (1.0, 1.0, 0.0)
+
+
+def nominal(robot: RobotParams) -> NominalRobot:
+    return NominalRobot(robot.wheel_radius_m, robot.wheel_base_m, robot.ticks_per_rev)
+
+
+def data_of(log, noise=DeadReckoningNoise()):
+    return odometry_data(log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal(log.robot), noise)
+
+
+def wrap(angle):
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@pytest.fixture(scope="module")
+def route_logs():
+    return [
+        simulate(HALL, ROUTE, start_pose=START, duration_s=30.0, rng=np.random.default_rng(seed)) for seed in range(4)
+    ]
+
+
+def ideal_run(v_m_s, omega_rad_s, duration_s=8.0):
+    """A scripted constant command with exact wheels and a perfect IMU (only the encoder
+    quantisation is left)."""
+    robot = RobotParams(true_wheel_radius_left_m=0.05, true_wheel_radius_right_m=0.05)
+    tiny = 1e-12  # the simulator's noise parameters are >= 0; a perfect IMU
+    sensors = SensorSuite(
+        gyro=GyroParams(tiny, tiny, tiny), accelerometer=AccelerometerParams(tiny, tiny, tiny)
+    )
+    return simulate(HALL, ScriptedProfile([0.0], [v_m_s], [omega_rad_s]), start_pose=(2.0, 4.0, 0.3),
+                    duration_s=duration_s, rng=np.random.default_rng(7), robot=robot, sensors=sensors)
+
+
+def test_straight_line_follows_the_closed_form():
+    log = ideal_run(0.4, 0.0)
+    history = run_dead_reckoning(data_of(log), initial_belief(log.pose[0], [1e-3, 1e-3, 1e-3]))
+    t = log.t_s
+    ramp_s = 0.4 / log.robot.a_max_m_s2  # speed ramps up at a_max, then holds
+    distance = np.where(t < ramp_s, 0.5 * log.robot.a_max_m_s2 * t**2, 0.4 * t - 0.5 * 0.4 * ramp_s)
+    along = (history.mean[:, 0, 0] - 2.0) * math.cos(0.3) + (history.mean[:, 0, 1] - 4.0) * math.sin(0.3)
+    across = -(history.mean[:, 0, 0] - 2.0) * math.sin(0.3) + (history.mean[:, 0, 1] - 4.0) * math.cos(0.3)
+    assert np.abs(along - distance).max() < 0.01  # metres over 3 m
+    assert np.abs(across).max() < 0.005
+    assert np.abs(history.mean[:, 0, THETA] - 0.3).max() < 2e-3
+    assert abs(history.mean[-1, 0, 3] - 0.4) < 0.01  # the speed state
+
+
+def test_pure_rotation_follows_the_closed_form():
+    log = ideal_run(0.0, 0.5)
+    history = run_dead_reckoning(data_of(log), initial_belief(log.pose[0], [1e-3, 1e-3, 1e-3]))
+    t = log.t_s
+    alpha = log.robot.alpha_max_rad_s2
+    ramp_s = 0.5 / alpha
+    turned = np.where(t < ramp_s, 0.5 * alpha * t**2, 0.5 * t - 0.5 * 0.5 * ramp_s)
+    assert np.abs(wrap(history.mean[:, 0, THETA] - 0.3 - turned)).max() < 0.01  # 4 rad turned
+    assert np.abs(history.mean[:, 0, :2] - [2.0, 4.0]).max() < 0.01
+    assert abs(history.mean[-1, 0, 4] - 0.5) < 0.01  # the yaw-rate state
+
+
+def truth_states(log):
+    robot = log.robot
+    d_wheel = (robot.true_wheel_radius_right_m - robot.true_wheel_radius_left_m) / robot.wheel_radius_m
+    return np.column_stack([
+        log.pose, log.velocity, log.gyro_bias_rad_s, log.accel_bias_m_s2[:, 0], np.full(len(log.t_s), d_wheel)
+    ])
+
+
+def test_tracks_the_truth_with_a_drift_that_grows_with_time_and_a_consistent_covariance(route_logs):
+    pose_nees, full_nees = [], []
+    for log in route_logs:
+        history = run_dead_reckoning(data_of(log), initial_belief(START, [0.01, 0.01, 0.01], batch=1),
+                                     record_full_cov=True)
+        error = history.mean[:, 0] - truth_states(log)
+        error[:, THETA] = wrap(error[:, THETA])
+        t = log.t_s
+        assert (np.hypot(error[:, 0], error[:, 1]) < 0.03 + 0.015 * t).all()
+        assert (np.abs(error[:, THETA]) < 0.02 + 0.006 * t).all()
+        samples = np.arange(100, len(t), 100)  # once a second
+        e, cov = error[samples], history.cov[samples, 0]
+        pose_nees.append(np.einsum("ti,tij,tj->t", e[:, :3], np.linalg.inv(cov[:, :3, :3]), e[:, :3]))
+        full_nees.append(np.einsum("ti,tij,tj->t", e, np.linalg.inv(cov), e))
+    # averages over 4 runs x 29 epochs; time-correlated samples, hence a generous band
+    assert 0.3 * 3 < np.mean(pose_nees) < 2.5 * 3
+    assert 0.3 * N_STATES < np.mean(full_nees) < 2.5 * N_STATES
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_wheel_radius_difference_and_biases_are_learned(seed):
+    # two circles (different speeds, same yaw rate) with stops: the gyro bias, the wheel
+    # radius difference (scales with the speed) and the accelerometer bias separate
+    profile = ScriptedProfile([0.0, 12.6, 14.6, 20.6], [0.4, 0.0, 0.2, 0.0], [0.5, 0.0, 0.5, 0.0])
+    log = simulate(HALL, profile, start_pose=(4.0, 3.5, 0.0), duration_s=23.0, rng=np.random.default_rng(seed))
+    history = run_dead_reckoning(data_of(log), initial_belief(log.pose[0], [0.01] * 3, batch=1),
+                                 record_full_cov=True)
+    truth = truth_states(log)[-1]
+    std = np.sqrt(np.diagonal(history.cov[-1, 0]))
+    prior = np.sqrt(np.diagonal(initial_belief(START, [0.01] * 3, batch=None).cov))
+    for i, shrink in ((5, 0.7), (6, 0.05), (D_WHEEL, 0.1)):
+        assert abs(history.mean[-1, 0, i] - truth[i]) < 3.0 * std[i]
+        assert std[i] < shrink * prior[i]
+
+
+@pytest.mark.parametrize("name", ["ukf", "iukf", "ekf", "iekf"])
+def test_lean_step_equals_c_filters(route_logs, name):
+    logs = route_logs[:2]
+    steps = 301
+    ticks = np.stack([log.wheel_ticks[:steps] for log in logs], axis=1)  # per-run data (N, 2, 2)
+    gyro = np.stack([log.gyro_rad_s[:steps] for log in logs], axis=1)
+    accel = np.stack([log.accel_m_s2[:steps] for log in logs], axis=1)
+    data = odometry_data(ticks, gyro, accel, 0.01, nominal(logs[0].robot))
+    start = initial_belief(START, [0.05, 0.03, 0.02])
+    rng = np.random.default_rng(3)
+    mixing = rng.standard_normal((2, N_STATES, N_STATES)) * 0.02
+    initial = Gaussian(start.mean + [[0.0] * 3 + [0.2, 0.1, 0.0, 0.0, 0.0]] * 2,
+                       start.cov + mixing @ mixing.mT, ANGLE_INDICES)
+    results = {}
+    for engine in ("lean", "generic"):
+        runner = DeadReckoning(data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True)
+        runner.run(150)
+        nudged = runner.belief
+        runner.replace(Gaussian(nudged.mean + [0.1, -0.1, 0.05, 0, 0, 0, 0, 0], nudged.cov, ANGLE_INDICES))
+        runner.run(steps - 1)
+        results[engine] = runner.history
+    lean, generic = results["lean"], results["generic"]
+    # the scaled points' tiny spread (alpha = 1e-3) turns rounding into ~1e-9 m after 300
+    # steps (see localization.sigma_points); the other filters agree to ~1e-14
+    assert np.abs(lean.mean - generic.mean).max() < 1e-8
+    std = np.sqrt(np.diagonal(generic.cov, axis1=-2, axis2=-1))
+    assert (np.abs(lean.cov - generic.cov) / (std[..., :, None] * std[..., None, :])).max() < 1e-9
+
+
+def test_iterated_filters_equal_their_plain_ones_on_the_linear_measurement(route_logs):
+    data = data_of(route_logs[1])
+    initial = initial_belief(START, [0.01, 0.01, 0.01])
+    points = DeadReckoningSettings(filter="iukf").sigma_points()
+    pairs = [("ekf", "iekf", None), ("ukf", "iukf", points)]
+    for plain, iterated, scheme in pairs:
+        histories = [
+            DeadReckoning(data, initial, DeadReckoningSettings(filter=f, points=scheme, engine="generic"))
+            for f in (plain, iterated)
+        ]
+        for runner in histories:
+            runner.run(100)
+        assert np.allclose(histories[0].history.mean, histories[1].history.mean, rtol=0.0, atol=1e-12)
+        assert np.allclose(histories[0].history.cov, histories[1].history.cov, rtol=1e-10, atol=1e-18)
+
+
+def test_batched_runs_equal_looped_runs(route_logs):
+    logs = route_logs[:3]
+    ticks = np.stack([log.wheel_ticks for log in logs], axis=1)
+    gyro = np.stack([log.gyro_rad_s for log in logs], axis=1)
+    accel = np.stack([log.accel_m_s2 for log in logs], axis=1)
+    batched = run_dead_reckoning(
+        odometry_data(ticks, gyro, accel, 0.01, nominal(logs[0].robot)), initial_belief(START, [0.01] * 3, batch=3)
+    )
+    for i, log in enumerate(logs):
+        alone = run_dead_reckoning(data_of(log), initial_belief(START, [0.01] * 3, batch=1))
+        assert np.allclose(batched.mean[:, i], alone.mean[:, 0], rtol=0.0, atol=1e-9)
+        assert np.allclose(batched.cov[:, i], alone.cov[:, 0], rtol=1e-9, atol=1e-16)
+
+
+def test_shared_data_drive_both_branches_alike(route_logs):
+    history = run_dead_reckoning(data_of(route_logs[0]), initial_belief(START, [0.01] * 3))
+    assert history.mean.shape == (3001, 2, N_STATES) and history.cov.shape == (3001, 2, 3, 3)
+    assert np.array_equal(history.mean[:, 0], history.mean[:, 1])
+
+
+def test_epoch_callback_replaces_the_fused_row_only(route_logs):
+    data = data_of(route_logs[0])
+    seen = []
+
+    def pull_to_origin(index, belief):
+        seen.append(index)
+        mean = np.array(belief.mean)
+        mean[1, :2] = 0.0
+        return Gaussian(mean, belief.cov, ANGLE_INDICES)
+
+    history = run_dead_reckoning(data, initial_belief(START, [0.01] * 3), epochs=[100, 200], on_epoch=pull_to_origin)
+    assert seen == [100, 200]
+    assert np.array_equal(history.mean[200, 1, :2], [0.0, 0.0])
+    assert np.abs(history.mean[200, 0, :2]).min() > 0.5  # the UKF-only branch was left alone
+    assert np.array_equal(history.mean[:100, 0], history.mean[:100, 1])
+
+
+def test_transition_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    state = rng.standard_normal((4, N_STATES))
+    accel = rng.standard_normal(4)
+    jac = transition_jacobian(state, accel, 0.01)
+    step = 1e-6
+    for j in range(N_STATES):
+        bump = np.zeros(N_STATES)
+        bump[j] = step
+        column = (transition(state + bump, accel, 0.01) - transition(state - bump, accel, 0.01)) / (2 * step)
+        assert np.allclose(jac[..., j], column, atol=1e-8)
+
+
+def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
+    log = route_logs[0]
+    robot = nominal(log.robot)
+    gyro = np.array(log.gyro_rad_s)
+    gyro[42] = np.nan
+    with pytest.raises(EstimationError, match="gyro_rad_s is not finite at sample 42"):
+        odometry_data(log.wheel_ticks, gyro, log.accel_m_s2, 0.01, robot)
+    with pytest.raises(EstimationError, match="must be"):
+        odometry_data(log.wheel_ticks, log.gyro_rad_s[:-1], log.accel_m_s2, 0.01, robot)
+    with pytest.raises(EstimationError, match="wheel_base_m"):
+        NominalRobot(0.05, -0.3, 2048)
+    with pytest.raises(EstimationError, match="filter must be one of"):
+        DeadReckoningSettings(filter="kalman")
+    runner = DeadReckoning(data_of(log), initial_belief(START, [0.01] * 3))
+    runner.run(10)
+    with pytest.raises(EstimationError, match="until_index"):
+        runner.run(5)
+    with pytest.raises(EstimationError, match="replace"):
+        runner.replace(initial_belief(START, [0.01] * 3, batch=3))
+
+
+def test_wide_heading_uncertainty_lean_equals_generic_or_is_refused(route_logs):
+    data = data_of(route_logs[0])
+    wide = initial_belief(START, [0.01, 0.01, 2.5])  # kappa points reach 4.3 rad from the mean
+    runs = [DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e)) for e in ("lean", "generic")]
+    for runner in runs:
+        runner.run(50)
+    assert np.abs(runs[0].history.mean - runs[1].history.mean).max() < 1e-12
+    assert np.abs(runs[0].history.cov - runs[1].history.cov).max() < 1e-12
+    hopeless = initial_belief(START, [0.01, 0.01, 2000.0])  # beyond what the scaled points allow
+    with pytest.raises(EstimationError, match="too uncertain"):
+        DeadReckoning(data, hopeless).run(10)
+
+
+def test_a_covariance_that_is_not_positive_definite_is_refused(route_logs):
+    start = initial_belief(START, [0.01] * 3)
+    cov = np.array(start.cov)
+    cov[:, 3, 3] = -1.0  # a negative speed variance
+    for name in ("ukf", "iukf"):  # the unscented filters factorise it (the EKF never does, as C's)
+        with pytest.raises(EstimationError, match="not positive definite"):
+            DeadReckoning(data_of(route_logs[0]), Gaussian(start.mean, cov, ANGLE_INDICES),
+                          DeadReckoningSettings(filter=name)).run(20)
