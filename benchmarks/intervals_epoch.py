@@ -1,0 +1,138 @@
+"""Benchmark: one interval tracking epoch and one global localisation on the ``hall`` map.
+
+Tracking epoch: prior box truth-centred up to 0.25 m / 0.1 rad, half-widths 0.5 m and 0.2 rad,
+``eps`` 0.05 m, default 16-sonar belt, bounded errors, echoes never lost. Global localisation:
+the whole hall, heading in [-pi, pi]. Random poses at least 0.3 m from every wall; the median
+wall time over many epochs is reported, with the set sizes. Each epoch is timed as the best of
+``--repeat`` identical runs (as ``timeit`` does) so that other processes on a shared machine
+do not inflate the figure; ``--repeat 1`` gives single-shot times. Exits 1 if a set loses the
+truth. Then both trackers (SIVIA on the inflated hull, IMAGESP) on the same 60 scans of a
+circuit, side by side.
+
+    python benchmarks/intervals_epoch.py [--epochs 200] [--global-runs 20] [--repeat 3] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from intervals.sonar import SonarBelt, SonarScan, localize
+from intervals.tracker import IntervalTracker, TrackerSettings
+from robotsim.maps import builtin_map, point_segment_distance
+from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+
+
+def _random_poses(segment_map, count: int, rng: np.random.Generator) -> np.ndarray:
+    b = segment_map.bounds
+    poses = []
+    while len(poses) < count:
+        p = np.array([*rng.uniform(b[:, 0], b[:, 1]), rng.uniform(-np.pi, np.pi)])
+        starts, ends = segment_map.segments[:, 0], segment_map.segments[:, 1]
+        d = point_segment_distance(p[None, :2], starts, ends)
+        if np.min(d) >= 0.3:
+            poses.append(p)
+    return np.array(poses)
+
+
+def _scan(segment_map, params, belt, truth, rng) -> SonarScan:
+    d = cone_distances(truth, segment_map.segments, params.mount_xy, params.mount_angle_rad,
+                       params.half_aperture_rad)
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
+    m = np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0.0)
+    return SonarScan(segment_map.segments, belt, np.where(d > params.d_max_m, np.inf, m),
+                     segment_map.boundary)
+
+
+def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str]:
+    """Both trackers on the same scans of a 2 m-radius circle at 0.3 m/s (1 Hz), side by side.
+    Limits 0.5 m/s and 0.5 rad/s; q_max 0 (the scans have no outliers)."""
+    omega = 0.15
+    t = np.arange(epochs, dtype=float)
+    heading = np.mod(omega * t + 1.5 * np.pi, 2 * np.pi) - np.pi
+    poses = np.stack([4.5 + 2 * np.cos(omega * t), 3.8 + 2 * np.sin(omega * t), heading], 1)
+    scans = [_scan(hall, params, belt, p, rng) for p in poses]
+    rows = []
+    for kind in ("sivia", "imagesp"):
+        settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind)
+        tracker, previous = IntervalTracker(settings, hall.bounds), None
+        times, boxes, areas, kept = [], [], [], 0
+        for truth, scan in zip(poses, scans):
+            best = np.inf
+            for _ in range(max(1, repeat)):
+                start = time.perf_counter()
+                result = tracker.step(previous, scan, 1.0)
+                best = min(best, time.perf_counter() - start)
+            if result.mode == "track":
+                times.append(best)
+                boxes.append(result.paving.outer.shape[0])
+                areas.append(result.paving.area_xy())
+            kept += int(result.consistent and result.paving.contains(truth[None])[0])
+            previous = result.paving
+        t_ms = np.array(times) * 1e3
+        rows.append(f"| {kind} tracker epoch (circuit, limits 0.5 m/s, 0.5 rad/s) | {len(times)} | "
+                    f"{np.median(t_ms):.1f} | {np.percentile(t_ms, 95):.1f} | "
+                    f"{np.median(boxes):.0f} | {np.median(areas):.4f} |")
+        if kept != epochs:
+            rows.append(f"| FAILED: {kind} kept the truth in {kept} of {epochs} epochs | | | | | |")
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--epochs", type=int, default=200)
+    parser.add_argument("--global-runs", type=int, default=20)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    hall = builtin_map("hall")
+    params = SonarBeltParams.default_belt()
+    belt = SonarBelt.from_params(params)
+    eps = 0.05
+    half = np.array([0.5, 0.5, 0.2])
+    b = hall.bounds
+    whole = np.array([b[0], b[1], [-np.pi, np.pi]])
+
+    rows, lost = [], 0
+    for label, runs in (
+        ("tracking epoch (prior +-0.5 m, +-0.2 rad)", args.epochs),
+        ("global localisation (whole hall)", args.global_runs),
+    ):
+        times, boxes, areas = [], [], []
+        for truth in _random_poses(hall, runs, rng):
+            scan = _scan(hall, params, belt, truth, rng)
+            if label.startswith("tracking"):
+                centre = truth + rng.uniform(-1, 1, 3) * np.array([0.25, 0.25, 0.1])
+                prior = np.stack([centre - half, centre + half], axis=-1)
+            else:
+                prior = whole
+            best = np.inf
+            for _ in range(max(1, args.repeat)):
+                start = time.perf_counter()
+                paving = localize(scan, prior, eps)
+                best = min(best, time.perf_counter() - start)
+            times.append(best)
+            boxes.append(paving.outer.shape[0])
+            areas.append(paving.area_xy())
+            lost += int(not paving.contains(truth[None])[0])
+        t = np.array(times) * 1e3
+        rows.append(f"| {label} | {runs} | {np.median(t):.1f} | {np.percentile(t, 95):.1f} | "
+                    f"{np.median(boxes):.0f} | {np.median(areas):.4f} |")
+    rows += _circuit_rows(hall, params, belt, rng, 60, args.repeat)
+    lost += sum("FAILED" in row for row in rows)
+    print("| case (hall, eps 0.05 m, 16 sonars) | runs | median ms | p95 ms | median boxes "
+          "| median (x, y) area m^2 |")
+    print("|---|---|---|---|---|---|")
+    print("\n".join(rows))
+    if lost:
+        print(f"FAILED: the truth left the set ({lost})", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,581 @@
+r"""Sound tests of the sonar cone model on pose boxes (MODELS.md sections 3-4, paper 002 s. 3).
+
+Model. Sensor ``i`` sits at ``m_i`` in the robot frame and points along ``alpha_i``; for the pose
+``p = (x, y, theta)`` it is at ``s_i(p) = (x, y) + R(theta) m_i`` and its cone holds the
+directions ``[theta + alpha_i - gamma, theta + alpha_i + gamma]``. The modelled reading
+``d_i(p)`` is the distance from ``s_i`` to the nearest map point inside the cone (``+inf`` if
+none). A reading ``m`` with ``|e| <= e_abs + e_rel d`` gives the distance interval
+``[d_i] = [(m - e_abs)/(1 + e_rel), (m + e_abs)/(1 - e_rel)]`` (outward rounded); a finite
+reading also means ``d <= d_max`` (the simulator returns no echo beyond), so ``hi`` is capped at
+``d_max``. A no-echo reading means ``d > d_max`` and is used (as ``[d_max, inf]``, free space)
+only when the caller states that echoes are never lost; otherwise it is ignored.
+
+Tests on a pose box ``[p] = [x] x [y] x [theta]`` for sensor ``i`` with ``[d_i] = [lo, hi]``.
+Write ``S`` for an outward-rounded box enclosing ``{s_i(p) : p in [p]}`` (computed as
+``[x] + |m_i| cos([theta] + beta_i)`` etc. with :mod:`intervals.interval`), ``Phi`` for the
+cone-direction interval ``[theta] + alpha_i + [-gamma, gamma]`` and ``Psi`` for the directions
+in the cone for *every* ``theta`` of the box: ``[theta_hi + alpha_i - gamma,
+theta_lo + alpha_i + gamma]`` (rounded inward; empty when the box is wider than ``2 gamma``).
+
+* **Hit (data) test** (reject when it fails). If ``d_i(p) in [lo, hi]`` with ``hi`` finite,
+  the nearest cone point ``P`` of some segment ``j`` satisfies ``P - s in W(Phi)`` (the wedge of
+  directions ``Phi``, apex included) and ``|P - s| in [lo, hi]``. Relaxation (each step gives a
+  superset, so rejection stays sound): let ``s`` range over ``S`` independently of the cone
+  direction; then ``P`` lies in ``U = S + W(Phi)``, which, when ``width(Phi) < pi``, is contained
+  in the two half-planes ``n_k . q >= min_{s in S} n_k . s`` (``n_k`` the inward normals of
+  the wedge edges; for ``width(Phi) >= pi`` we use the whole plane). Clipping segment ``j`` to
+  them gives a sub-segment ``seg'`` holding ``P``; hence ``dist(seg', S) <= |P - s| <= hi`` and
+  ``max_{q in seg', s in S} |q - s| >= lo``. The box is rejected by sensor ``i`` when no segment
+  passes both, evaluated with a lower bound of ``dist(seg', S)`` (``_segment_box_gap``) and an
+  upper bound of the maximum (attained at an end of ``seg'`` and a corner of ``S``).
+* **Free-space test** (reject when it fires). If ``P`` on a segment lies in
+  ``W(s, Psi)`` for every ``s in S`` (the half-planes ``n_k . P >= max_{s in S} n_k . s``, an
+  intersection of wedges, exact) and ``|P - c| + r < lo`` with ``c, r`` the centre and
+  half-diagonal of ``S`` (so ``|P - s| < lo`` for every ``s in S``), then for every pose of the
+  box ``P`` is in the cone closer than ``lo``, so ``d_i(p) < lo``: the box is infeasible.
+* **Inner acceptance** (optional). Every pose of the box satisfies sensor ``i`` when
+  ``dist(seg'_j, S) >= lo`` for every segment (so ``d_i >= lo``) and some segment has a point
+  as in the free-space test with ``|P - c| + r <= hi`` (so ``d_i <= hi``); for a no-echo reading
+  the first condition with ``> d_max`` suffices.
+* **In-room test**: with a boundary polygon, a box whose (x, y) rectangle meets no boundary
+  edge and whose centre is outside the polygon lies entirely outside the free space: rejected.
+  (Inner when no edge meets it and the centre is inside.)
+* Only segments within ``reach`` of the hull of the sensor boxes take part (``reach`` = the
+  largest ``hi`` of an echo, or ``d_max`` when no-echo readings are used): farther segments can
+  neither be hit within ``hi`` nor be closer than any ``lo``.
+* **q-relaxation**: a box is OUTSIDE when the in-room test rejects it or more than ``q`` sensors
+  reject it; INSIDE (if inner tests are on) when it is inside the room and at most ``q``
+  sensors are not certainly satisfied; else UNDECIDED. GOMNE raises ``q`` from 0.
+
+Floating point. The reading intervals, ``S``, ``Phi`` and ``Psi`` are outward (``Psi``:
+inward) rounded with :mod:`intervals.interval`. The geometric predicates (half-plane clips,
+distances) are evaluated in float64 on coordinates bounded by ``MAX_COORDINATE_M = 1e3`` m
+(checked); each is a handful of operations, so a computed point or distance is off by
+``delta <= 1e-12`` m (a few ulps of 1e3). The one amplified error is the direction used by
+``_segment_box_gap``: tilted by at most ``2 delta / NEAR_SWITCH_M = 2e-10`` rad, which moves
+its bound by at most ``2e-10 * 3e3 m = 6e-7`` m. Every comparison is biased in favour of keeping
+the box by ``GUARD_M = 1e-5`` m, more than ten times these errors, so a float error never turns
+a feasible box into a rejected one. A half-plane clip shifted by ``GUARD_M`` moves its boundary
+by ``GUARD_M`` in space, whatever the angle between the segment and the boundary, and its
+rounding error scales with the same angle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from intervals import interval as ia
+from intervals.boxes import (
+    DEFAULT_HEADING_SCALE_M_PER_RAD,
+    Subpaving,
+    as_boxes,
+    hull,
+    pose_scale,
+)
+from intervals.errors import IntervalError
+from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
+
+GUARD_M = 1e-5
+"""Bias (metres) of every geometric comparison in favour of keeping a box (see module doc)."""
+
+MAX_COORDINATE_M = 1e3
+"""Largest map coordinate accepted: keeps float errors far below :data:`GUARD_M`."""
+
+NEAR_SWITCH_M = 1e-2
+"""Below this centre-to-segment distance the segment-box gap uses the triangle-inequality
+bound, whose rounding error does not grow as the distance shrinks (see ``_segment_box_gap``)."""
+
+IGNORED, ECHO, FREE = 0, 1, 2
+"""Kinds of sensor constraint: no information, an echo ``[lo, hi]``, free space to ``d_max``."""
+
+
+@dataclass(frozen=True, eq=False)
+class SonarBelt:
+    """Geometry and error bounds of a sonar belt (same fields as ``robotsim``'s parameters).
+
+    ``mount_xy (k, 2)`` robot frame, m; ``mount_angle_rad (k,)`` robot frame;
+    ``half_aperture_rad`` in ``(0, pi/2)``; ``d_max_m`` range limit;
+    ``|error| <= error_abs_bound_m + error_rel_bound * d``; ``echoes_never_lost``: a no-echo
+    reading then proves free space up to ``d_max_m`` (only true when the sensor cannot lose an
+    echo: see the team contract).
+    """
+
+    mount_xy: np.ndarray
+    mount_angle_rad: np.ndarray
+    half_aperture_rad: float
+    d_max_m: float = 3.0
+    error_abs_bound_m: float = 0.02
+    error_rel_bound: float = 0.01
+    echoes_never_lost: bool = False
+
+    def __post_init__(self) -> None:
+        xy = np.array(self.mount_xy, dtype=np.float64)
+        ang = np.array(self.mount_angle_rad, dtype=np.float64)
+        if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] == 0 or ang.shape != (xy.shape[0],):
+            raise IntervalError(
+                f"sonar belt: mount_xy must be (k, 2) and mount_angle_rad (k,), got "
+                f"{xy.shape} and {ang.shape}"
+            )
+        if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(ang))):
+            raise IntervalError("sonar belt: mount positions and angles must be finite")
+        checks = (
+            (0.0 < self.half_aperture_rad < np.pi / 2, "half_aperture_rad must be in (0, pi/2)"),
+            (0.0 < self.d_max_m < np.inf, "d_max_m must be positive and finite"),
+            (0.0 <= self.error_abs_bound_m < np.inf, "error_abs_bound_m must be >= 0"),
+            (0.0 <= self.error_rel_bound < 1.0, "error_rel_bound must be in [0, 1)"),
+        )
+        for ok, message in checks:
+            if not ok:
+                raise IntervalError(f"sonar belt: {message}")
+        xy.setflags(write=False)
+        ang.setflags(write=False)
+        object.__setattr__(self, "mount_xy", xy)
+        object.__setattr__(self, "mount_angle_rad", ang)
+
+    @classmethod
+    def from_params(cls, params, echoes_never_lost: bool | None = None) -> SonarBelt:
+        """From any object with the fields of ``robotsim.sensors.sonar.SonarBeltParams``.
+
+        ``echoes_never_lost`` defaults to ``params.lost_echo_prob == 0``.
+        """
+        if echoes_never_lost is None:
+            echoes_never_lost = getattr(params, "lost_echo_prob", 1.0) == 0.0
+        return cls(
+            mount_xy=params.mount_xy,
+            mount_angle_rad=params.mount_angle_rad,
+            half_aperture_rad=float(params.half_aperture_rad),
+            d_max_m=float(params.d_max_m),
+            error_abs_bound_m=float(params.error_abs_bound_m),
+            error_rel_bound=float(params.error_rel_bound),
+            echoes_never_lost=bool(echoes_never_lost),
+        )
+
+    @property
+    def count(self) -> int:
+        """Number of sensors k."""
+        return self.mount_angle_rad.shape[0]
+
+    @cached_property
+    def mount_polar(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(radius (k, 2), angle (k, 2))`` intervals of the mounts in polar form, robot frame:
+        ``m_i = r_i (cos beta_i, sin beta_i)``; ``hypot`` and ``arctan2`` are within 1 ulp, the
+        intervals are widened by 1 and 2 ulps."""
+        radius = np.hypot(self.mount_xy[:, 0], self.mount_xy[:, 1])
+        beta = np.arctan2(self.mount_xy[:, 1], self.mount_xy[:, 0])
+        return (
+            np.stack([np.maximum(_down(radius), 0.0), _up(radius)], axis=-1),
+            np.stack([_down(_down(beta)), _up(_up(beta))], axis=-1),
+        )
+
+    @cached_property
+    def cone_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(outer (k, 2), inner (k, 2))``: ``alpha_i -+ gamma`` rounded outward, and rounded
+        inward (``[up(alpha - gamma), down(alpha + gamma)]``)."""
+        lo = self.mount_angle_rad - self.half_aperture_rad
+        hi = self.mount_angle_rad + self.half_aperture_rad
+        return np.stack([_down(lo), _up(hi)], axis=-1), np.stack([_up(lo), _down(hi)], axis=-1)
+
+
+def _down(x):
+    return np.nextafter(x, -np.inf)
+
+
+def _up(x):
+    return np.nextafter(x, np.inf)
+
+
+def reading_intervals(readings_m, belt: SonarBelt) -> tuple[np.ndarray, np.ndarray]:
+    """Distance intervals and constraint kinds from readings ``(k,)`` (``inf`` = no echo).
+
+    Returns ``(ranges (k, 2), kind (k,) int8)``: for an echo
+    ``[(m - e_abs)/(1 + e_rel), min((m + e_abs)/(1 - e_rel), d_max)]`` rounded outward (lower
+    bound at least 0; an echo whose interval is empty cannot come from a fault-free sensor, it is
+    marked by ``lo > hi`` and rejects every box); a no-echo reading gives ``[d_max, inf]`` of
+    kind :data:`FREE` when ``belt.echoes_never_lost``, else kind :data:`IGNORED`.
+    Raises :class:`IntervalError` for a wrong shape, NaN or negative readings.
+    """
+    m = np.asarray(readings_m, dtype=np.float64)
+    if m.shape != (belt.count,):
+        raise IntervalError(f"sonar readings: expected shape ({belt.count},), got {m.shape}")
+    if np.any(np.isnan(m)) or np.any(m < 0) or np.any(m == -np.inf):
+        raise IntervalError("sonar readings: NaN or negative reading (use inf for no echo)")
+    echo = np.isfinite(m)
+    mf = np.where(echo, m, 0.0)
+    lo = _down(_down(mf - belt.error_abs_bound_m) / _up(1.0 + belt.error_rel_bound))
+    hi = _up(_up(mf + belt.error_abs_bound_m) / _down(1.0 - belt.error_rel_bound))
+    lo = np.maximum(lo, 0.0)
+    hi = np.minimum(hi, belt.d_max_m)
+    free = ~echo & belt.echoes_never_lost
+    kind = np.where(echo, ECHO, np.where(free, FREE, IGNORED)).astype(np.int8)
+    lo = np.where(echo, lo, np.where(free, belt.d_max_m, 0.0))
+    hi = np.where(echo, hi, np.inf)
+    return np.stack([lo, hi], axis=-1), kind
+
+
+@dataclass(frozen=True, eq=False)
+class SonarScan:
+    """One scan's constraints against a map: everything the box tests need.
+
+    ``segments (m, 2, 2)`` world frame, m; ``belt``; ``readings_m (k,)``; ``boundary (p, 2)``
+    outer wall polygon whose interior is the free space, or None. Derived fields: ``ranges
+    (k, 2)`` and ``kind (k,)`` from :func:`reading_intervals`; ``reach_m``: the largest distance
+    at which a segment can matter to some sensor (0 if no sensor is used).
+    """
+
+    segments: np.ndarray
+    belt: SonarBelt
+    readings_m: np.ndarray
+    boundary: np.ndarray | None = None
+    ranges: np.ndarray = field(init=False)
+    kind: np.ndarray = field(init=False)
+    reach_m: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        seg = np.array(self.segments, dtype=np.float64)
+        if seg.ndim != 3 or seg.shape[1:] != (2, 2):
+            raise IntervalError(f"sonar scan: segments must be (m, 2, 2), got {seg.shape}")
+        if not np.all(np.abs(seg) <= MAX_COORDINATE_M):
+            raise IntervalError(
+                f"sonar scan: segment coordinates must be finite, |.| <= {MAX_COORDINATE_M} m"
+            )
+        boundary = None
+        if self.boundary is not None:
+            boundary = np.array(self.boundary, dtype=np.float64)
+            if boundary.ndim != 2 or boundary.shape[1] != 2 or boundary.shape[0] < 3:
+                raise IntervalError(
+                    f"sonar scan: boundary must be (p >= 3, 2), got {boundary.shape}"
+                )
+            if not np.all(np.abs(boundary) <= MAX_COORDINATE_M):
+                raise IntervalError("sonar scan: boundary coordinates must be finite and bounded")
+        ranges, kind = reading_intervals(self.readings_m, self.belt)
+        object.__setattr__(self, "segments", seg)
+        object.__setattr__(self, "boundary", boundary)
+        object.__setattr__(self, "readings_m", np.asarray(self.readings_m, dtype=np.float64))
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "kind", kind)
+        used = kind != IGNORED
+        reach = np.where(kind == ECHO, ranges[:, 1], self.belt.d_max_m)
+        object.__setattr__(self, "reach_m", float(np.max(reach[used])) if used.any() else 0.0)
+
+    def restricted_to(self, boxes: np.ndarray) -> SonarScan:
+        """The same scan with only the segments that can matter to poses in ``boxes``."""
+        hull_xy = hull(as_boxes(boxes))[:2]
+        radius = float(np.max(np.hypot(*self.belt.mount_xy.T)))
+        a, e = self.segments[:, 0], self.segments[:, 1] - self.segments[:, 0]
+        centre, half = (hull_xy[:, 0] + hull_xy[:, 1]) / 2, (hull_xy[:, 1] - hull_xy[:, 0]) / 2
+        gap = _segment_box_gap(a[:, 0], a[:, 1], e[:, 0], e[:, 1], *centre, *half)
+        near = gap <= self.reach_m + radius + GUARD_M
+        return SonarScan(self.segments[near], self.belt, self.readings_m, self.boundary)
+
+
+# ---------------------------------------------------------------------------------------------
+# Vectorised geometric primitives on component arrays (x and y separately, broadcast shapes).
+# Boxes are given by centre (cx, cy) and half-widths (hx, hy): a box [lo, hi] is enclosed by
+# [c - h, c + h] up to one rounding of (lo + hi)/2 and (hi - lo)/2, far below GUARD_M.
+
+
+def _nearest_on_segment(px, py, ax, ay, ex, ey):
+    """Nearest point of segments ``a + t e, t in [0, 1]`` to points ``p``: ``(qx, qy, dist)``."""
+    ee = ex * ex + ey * ey
+    t = ((px - ax) * ex + (py - ay) * ey) / np.where(ee > 0, ee, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    qx, qy = ax + t * ex, ay + t * ey
+    return qx, qy, np.hypot(qx - px, qy - py)
+
+
+def _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy):
+    """Lower bound of the distance between segments ``a + t e`` and boxes ``(c, h)``.
+
+    For any unit vector ``u``, ``dist(seg, box) >= min_seg u.q - max_box u.s``; we take ``u``
+    from the box centre towards the nearest segment point ``q*``, for which
+    ``min_seg u.q = u.q*`` (projection property of the nearest point of a convex set), so the
+    bound is ``|q* - c| - (|u_x| h_x + |u_y| h_y)``: exact in most configurations. A rounding
+    error ``delta`` in ``q*`` tilts ``u`` by ``delta / |q* - c|`` and moves that identity by at
+    most the tilt times the segment's extent; below ``NEAR_SWITCH_M`` we therefore use the
+    always-valid ``|q* - c| - |h|`` (triangle inequality) instead (see the module doc).
+    """
+    qx, qy, dist = _nearest_on_segment(cx, cy, ax, ay, ex, ey)
+    far = dist >= NEAR_SWITCH_M
+    safe = np.where(far, dist, 1.0)
+    spread = np.abs(qx - cx) / safe * hx + np.abs(qy - cy) / safe * hy
+    return dist - np.where(far, spread, np.hypot(hx, hy))
+
+
+def _point_box_farthest(px, py, cx, cy, hx, hy):
+    """Largest distance from points to the points of boxes ``(c, h)``."""
+    return np.hypot(np.abs(px - cx) + hx, np.abs(py - cy) + hy)
+
+
+def _clip_segment(ax, ay, ex, ey, constraints, t_lo, t_hi):
+    """Parameter range of ``a + t e`` (t in ``[t_lo, t_hi]``) satisfying ``nx qx + ny qy >= c``
+    for each ``(nx, ny, c)`` of ``constraints``; empty where the returned ``lo > hi``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for nx, ny, c in constraints:
+            g0 = nx * ax + ny * ay - c
+            ge = nx * ex + ny * ey
+            bound = -g0 / ge
+            t_lo = np.where(ge > 0, np.maximum(t_lo, bound), t_lo)
+            t_hi = np.where(ge < 0, np.minimum(t_hi, bound), t_hi)
+            t_hi = np.where((ge == 0) & ~(g0 >= 0), -np.inf, t_hi)
+    return t_lo, t_hi
+
+
+def _wedge_constraints(angle_lo, angle_hi, cx, cy, hx, hy, sign):
+    """Half-planes bounding wedges of directions ``[angle_lo, angle_hi]`` with apexes in the
+    boxes ``(c, h)``: ``det(u_lo, q) >= k_1`` and ``det(q, u_hi) >= k_2`` where ``k`` is the
+    minimum over the box minus ``GUARD_M`` (``sign = -1``: union of the wedges, a superset) or
+    the maximum plus ``GUARD_M`` (``sign = +1``: intersection of the wedges, a subset)."""
+    out = []
+    for angle, flip in ((angle_lo, 1.0), (angle_hi, -1.0)):
+        nx, ny = -flip * np.sin(angle), flip * np.cos(angle)
+        spread = np.abs(nx) * hx + np.abs(ny) * hy
+        out.append((nx, ny, nx * cx + ny * cy + sign * (spread + GUARD_M)))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _SensorBoxes:
+    """Per box and sensor ``(N, k)``: the sensor-position box (centre ``cx, cy``, half-widths
+    ``hx, hy``), the two half-planes ``(nx, ny, c)`` holding ``S + W(Phi)`` (``union``; ``c =
+    -inf`` where ``width(Phi) >= pi``) and the two holding the intersection of the wedges
+    ``s + W(Psi)`` over ``s in S`` (``inter``), and ``sure``: ``Psi`` is not empty."""
+
+    cx: np.ndarray
+    cy: np.ndarray
+    hx: np.ndarray
+    hy: np.ndarray
+    union: tuple
+    inter: tuple
+    sure: np.ndarray
+
+
+def _scale_positive(r: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``r * c`` for intervals ``r`` with ``r_lo >= 0`` (the mount radii), rounded outward: the
+    extreme products are ``min(r_lo c_lo, r_hi c_lo)`` and ``max(r_lo c_hi, r_hi c_hi)``."""
+    lo = np.minimum(r[..., 0] * c[..., 0], r[..., 1] * c[..., 0])
+    hi = np.maximum(r[..., 0] * c[..., 1], r[..., 1] * c[..., 1])
+    return np.stack([_down(lo), _up(hi)], axis=-1)
+
+
+def _sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
+    r_iv, beta_iv = belt.mount_polar
+    cone, sure = belt.cone_offsets
+    theta = boxes[:, None, 2, :]
+    cos_a, sin_a = ia.cos_sin(ia.add(theta, beta_iv))
+    sx = ia.add(boxes[:, None, 0, :], _scale_positive(r_iv, cos_a))  # (N, k, 2)
+    sy = ia.add(boxes[:, None, 1, :], _scale_positive(r_iv, sin_a))
+    cx, cy = (sx[..., 0] + sx[..., 1]) / 2.0, (sy[..., 0] + sy[..., 1]) / 2.0
+    hx, hy = (sx[..., 1] - sx[..., 0]) / 2.0, (sy[..., 1] - sy[..., 0]) / 2.0
+    phi = ia.add(theta, cone)
+    union = _wedge_constraints(phi[..., 0], phi[..., 1], cx, cy, hx, hy, -1.0)
+    narrow = (phi[..., 1] - phi[..., 0]) < np.pi
+    union = tuple((nx, ny, np.where(narrow, c, -np.inf)) for nx, ny, c in union)
+    psi_lo = _up(theta[..., 1] + sure[:, 0])
+    psi_hi = _down(theta[..., 0] + sure[:, 1])
+    inter = tuple(_wedge_constraints(psi_lo, psi_hi, cx, cy, hx, hy, 1.0))
+    return _SensorBoxes(cx, cy, hx, hy, union, inter, psi_lo < psi_hi)
+
+
+def _room_verdict(boxes: np.ndarray, boundary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(outside (N,), inside (N,))``: the (x, y) rectangle lies entirely outside / inside the
+    boundary polygon: no edge comes within ``GUARD_M`` of it (sound lower bound of the
+    distance) and the ray cast from its centre says outside / inside."""
+    a = boundary
+    e = np.roll(boundary, -1, axis=0) - a
+    cx = ((boxes[:, 0, 0] + boxes[:, 0, 1]) / 2.0)[:, None]
+    cy = ((boxes[:, 1, 0] + boxes[:, 1, 1]) / 2.0)[:, None]
+    hx = ((boxes[:, 0, 1] - boxes[:, 0, 0]) / 2.0)[:, None]
+    hy = ((boxes[:, 1, 1] - boxes[:, 1, 0]) / 2.0)[:, None]
+    gap = _segment_box_gap(a[:, 0], a[:, 1], e[:, 0], e[:, 1], cx, cy, hx, hy)
+    clear = np.all(gap > GUARD_M, axis=1)
+    # ray casting to +x; reliable because the centre is more than GUARD_M from every edge
+    ay, by = a[:, 1], a[:, 1] + e[:, 1]
+    crosses = (ay > cy) != (by > cy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_cross = a[:, 0] + (cy - ay) * e[:, 0] / e[:, 1]
+    inside = (np.count_nonzero(crosses & (x_cross > cx), axis=1) % 2) == 1
+    return clear & ~inside, clear & inside
+
+
+def sensor_verdicts(
+    boxes, scan: SonarScan, inner: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per box and sensor: ``(reject (N, k), certain (N, k))`` bool arrays.
+
+    ``reject``: the sensor's reading is inconsistent with every pose of the box (hit test fails
+    or free-space test fires). ``certain``: the reading is consistent with every pose of the box
+    (only computed when ``inner``; else all False). Ignored sensors never reject and are always
+    certain. See the module doc for the tests and their soundness.
+    """
+    boxes = as_boxes(boxes)
+    n, k = boxes.shape[0], scan.belt.count
+    lo_d, hi_d = scan.ranges[:, 0], scan.ranges[:, 1]
+    echo, free = scan.kind == ECHO, scan.kind == FREE
+    sb = _sensor_boxes(boxes, scan.belt)
+
+    # visible segments: pairs (box, segment) within reach of the hull of the sensor boxes
+    seg = scan.segments
+    sx_lo, sx_hi = (sb.cx - sb.hx).min(axis=1), (sb.cx + sb.hx).max(axis=1)
+    sy_lo, sy_hi = (sb.cy - sb.hy).min(axis=1), (sb.cy + sb.hy).max(axis=1)
+    gap = _segment_box_gap(
+        seg[:, 0, 0], seg[:, 0, 1], seg[:, 1, 0] - seg[:, 0, 0], seg[:, 1, 1] - seg[:, 0, 1],
+        ((sx_lo + sx_hi) / 2)[:, None], ((sy_lo + sy_hi) / 2)[:, None],
+        ((sx_hi - sx_lo) / 2)[:, None], ((sy_hi - sy_lo) / 2)[:, None],
+    )
+    box_idx, seg_idx = np.nonzero(gap <= scan.reach_m + GUARD_M)  # (P,) visible pairs
+    ax, ay = seg[seg_idx, 0, 0][:, None], seg[seg_idx, 0, 1][:, None]  # (P, 1)
+    ex, ey = seg[seg_idx, 1, 0][:, None] - ax, seg[seg_idx, 1, 1][:, None] - ay
+
+    # stage 1, every (pair, sensor): the part [t0, t1] of the segment in S + W(Phi)
+    union = tuple(tuple(v[box_idx] for v in h) for h in sb.union)
+    zeros = np.zeros((box_idx.size, k))
+    t0, t1 = _clip_segment(ax, ay, ex, ey, union, zeros, zeros + 1.0)
+    # stage 2, only the (pair, sensor) triples whose segment part is not empty and whose
+    # sensor is used: nothing else can satisfy the hit test or fire the free-space test
+    pair, sensor = np.nonzero((t0 <= t1) & (scan.kind != IGNORED))  # (T,)
+    t0, t1 = t0[pair, sensor], t1[pair, sensor]
+    box, j = box_idx[pair], seg_idx[pair]
+    ax, ay = seg[j, 0, 0], seg[j, 0, 1]
+    ex, ey = seg[j, 1, 0] - ax, seg[j, 1, 1] - ay
+    cx, cy, hx, hy = sb.cx[box, sensor], sb.cy[box, sensor], sb.hx[box, sensor], sb.hy[box, sensor]
+    lo_t, hi_t = lo_d[sensor], hi_d[sensor]
+
+    # hit test: distance bounds between that part and the sensor box
+    p0x, p0y = ax + t0 * ex, ay + t0 * ey
+    dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
+    dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy) - GUARD_M
+    dist_ub = np.maximum(
+        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+    ) + GUARD_M
+    hit_ok = (dist_lb <= hi_t) & (dist_ub >= lo_t)
+
+    # free-space test: segment points inside the cone for every pose of the box
+    # (the intersection of the wedges lies in their union, so these triples suffice)
+    inter = tuple(tuple(v[box, sensor] for v in h) for h in sb.inter)
+    ones = np.ones(t0.shape)
+    u0, u1 = _clip_segment(ax, ay, ex, ey, inter, 0.0 * ones, ones)
+    sure = sb.sure[box, sensor] & (u0 <= u1)
+    u0, u1 = np.where(sure, u0, 0.0), np.where(sure, u1, 0.0)
+    far_bound = _nearest_on_segment(
+        cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
+    )[2] + np.hypot(hx, hy) + GUARD_M  # >= |P - s| for every s of the sensor box
+    free_fires = sure & (far_bound < lo_t)
+
+    idx = box * k + sensor
+
+    def any_pair(flags):
+        return np.bincount(idx, weights=flags, minlength=n * k).reshape(n, k) > 0
+
+    impossible = echo & (lo_d > hi_d)
+    reject = (echo & (~any_pair(hit_ok) | impossible)) | ((echo | free) & any_pair(free_fires))
+    certain = np.zeros((n, k), dtype=bool)
+    if inner:
+        too_close = np.where(free[sensor], dist_lb <= lo_t, dist_lb < lo_t)
+        all_far = ~any_pair(too_close)
+        sure_hit = any_pair(sure & (far_bound <= hi_t))
+        certain = (echo & all_far & sure_hit & ~impossible) | (free & all_far)
+        certain |= scan.kind == IGNORED
+    return reject, certain
+
+
+def box_test(boxes, scan: SonarScan, q: int = 0, inner: bool = True) -> np.ndarray:
+    """SIVIA test ``(N,) int8``: OUTSIDE when the in-room test or more than ``q`` sensors reject
+    the box, INSIDE when (``inner``) it is inside the room and at most ``q`` sensors are not
+    certainly satisfied, else UNDECIDED."""
+    boxes = as_boxes(boxes)
+    reject, certain = sensor_verdicts(boxes, scan, inner)
+    out = np.count_nonzero(reject, axis=1) > q
+    inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
+    if scan.boundary is not None:
+        room_out, room_in = _room_verdict(boxes, scan.boundary)
+        out |= room_out
+        inside &= room_in
+    return np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
+
+
+def localize(
+    scan: SonarScan,
+    initial,
+    eps: float,
+    q: int = 0,
+    heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
+    inner: bool = False,
+    splits_per_level: int = 3,
+) -> Subpaving:
+    """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
+
+    ``initial``: a pose box ``(3, 2)`` or a subpaving ``(N, 3, 2)``. Only the segments within
+    reach of the initial boxes take part. ``inner=False`` (default) skips the inner acceptance
+    test: the outer approximation is what the fusion uses, and it is cheaper.
+    """
+    if not (isinstance(q, (int, np.integer)) and q >= 0):
+        raise IntervalError(f"q must be a non-negative integer, got {q!r}")
+    boxes = as_boxes(initial, "initial pose boxes")
+    if boxes.shape[1] != 3:
+        raise IntervalError(f"initial pose boxes must be (N, 3, 2), got {boxes.shape}")
+    local = scan.restricted_to(boxes)
+    return sivia(
+        lambda b: box_test(b, local, q, inner),
+        boxes,
+        eps,
+        pose_scale(heading_scale_m_per_rad),
+        splits_per_level=splits_per_level,
+    )
+
+
+@dataclass(frozen=True)
+class GomneResult:
+    """Outcome of :func:`gomne`.
+
+    ``q``: GOMNE's estimate, the smallest number of outliers that leaves a non-empty set (None
+    when even ``q_max`` leaves it empty: the data are inconsistent); ``q_set``: the relaxation
+    of the returned ``paving`` (``q_max`` when guaranteed, else ``q``).
+    """
+
+    paving: Subpaving
+    q: int | None
+    q_set: int | None
+
+    @property
+    def consistent(self) -> bool:
+        """False when no ``q <= q_max`` explains the data (never clamp to this set)."""
+        return self.q is not None
+
+
+def gomne(
+    scan: SonarScan,
+    initial,
+    eps: float,
+    q_max: int,
+    heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
+    inner: bool = False,
+    guaranteed: bool = True,
+) -> GomneResult:
+    """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
+
+    The sets are nested (``S_0 ⊆ S_1 ⊆ ... ⊆ S_qmax``), so ``S_qmax`` is paved first (empty:
+    inconsistent, stop), then ``q = 0, 1, ...`` are tried on its boxes only (each a single
+    cheap SIVIA pass over boxes already at ``eps``).
+
+    ``guaranteed=True`` returns ``S_qmax``: it holds the true pose whenever at most ``q_max``
+    readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
+    miss the truth: outliers that happen to agree with some other pose make fewer than the
+    actual number of outliers suffice, and ``S_q`` then holds only those other poses.
+    """
+    if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
+        raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
+    widest = localize(scan, initial, eps, q_max, heading_scale_m_per_rad, inner)
+    if widest.is_empty:
+        return GomneResult(widest, None, None)
+    for q in range(q_max):
+        paving = localize(scan, widest.outer, eps, q, heading_scale_m_per_rad, inner)
+        if not paving.is_empty:
+            return GomneResult(widest if guaranteed else paving, q, q_max if guaranteed else q)
+    return GomneResult(widest, q_max, q_max)

@@ -1,0 +1,174 @@
+"""The 1 Hz interval tracker: global localisation, tracking, GOMNE, relocalisation.
+
+Paper 002 section 3: the pose set is first found globally (whole map, any heading); at each
+later scan the previous set is predicted *by the robot's physical limits* (it can have moved
+at most ``v_max dt`` and turned at most ``omega_max dt``) and contracted by the sonar tests.
+Two predictions are offered (MODELS.md section 4):
+
+* ``"sivia"``: the hull of the previous outer boxes, inflated by the limits, inverted as one
+  box;
+* ``"imagesp"``: every previous box mapped through the motion inclusion function (by default
+  the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
+  SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
+
+Outliers: GOMNE raises ``q`` from 0 to ``q_max``. When even ``q_max`` leaves the tracked set
+empty the data are inconsistent with the prediction (a kidnapping, or more outliers than
+``q_max``): the tracker relocalises globally at once; if that is empty too, the epoch is
+reported inconsistent, no set is returned (never clamp to an empty set) and the next epoch
+starts globally again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from intervals.boxes import (
+    Subpaving,
+    as_boxes,
+    hull,
+    inflate,
+    pose_scale,
+    unwrap_headings,
+    wrap_headings,
+)
+from intervals.errors import IntervalError
+from intervals.imagesp import imagesp
+from intervals.sonar import SonarScan, gomne
+
+TRACKERS = ("sivia", "imagesp")
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """Settings of the interval tracker (validated at construction).
+
+    ``eps_m``: SIVIA precision (scaled widths, m); ``heading_scale_m_per_rad``: metres per
+    radian when comparing widths; ``q_max``: largest number of outliers GOMNE may assume;
+    ``v_max_m_s``, ``omega_max_rad_s``: the robot's physical limits; ``tracker``: ``"sivia"``
+    or ``"imagesp"``; ``imagesp_pitch_m``: grid pitch of the IMAGESP prediction (scaled like
+    ``eps_m``; coarser than ``eps_m`` keeps the number of cells small before SIVIA refines);
+    ``guaranteed``: keep the ``q_max``-relaxed set, which holds the truth whenever a scan has
+    at most ``q_max`` outliers (True), or GOMNE's smaller set at its minimal ``q``, which can
+    miss it (False; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger
+    where few sensors see a wall, and a kidnapping is then detected later.
+    """
+
+    v_max_m_s: float
+    omega_max_rad_s: float
+    eps_m: float = 0.05
+    heading_scale_m_per_rad: float = 1.0
+    q_max: int = 2
+    tracker: str = "sivia"
+    imagesp_pitch_m: float = 0.2
+    guaranteed: bool = True
+
+    def __post_init__(self) -> None:
+        checks = (
+            (np.isfinite(self.v_max_m_s) and self.v_max_m_s >= 0, "v_max_m_s must be >= 0"),
+            (np.isfinite(self.omega_max_rad_s) and self.omega_max_rad_s >= 0,
+             "omega_max_rad_s must be >= 0"),
+            (np.isfinite(self.eps_m) and self.eps_m > 0, "eps_m must be > 0"),
+            (np.isfinite(self.heading_scale_m_per_rad) and self.heading_scale_m_per_rad > 0,
+             "heading_scale_m_per_rad must be > 0"),
+            (isinstance(self.q_max, (int, np.integer)) and self.q_max >= 0,
+             "q_max must be an integer >= 0"),
+            (self.tracker in TRACKERS, f"tracker must be one of {TRACKERS}"),
+            (np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
+             "imagesp_pitch_m must be >= eps_m"),
+        )
+        for ok, message in checks:
+            if not ok:
+                raise IntervalError(f"tracker settings: {message}, got {self}")
+
+
+@dataclass(frozen=True)
+class EpochResult:
+    """Outcome of one tracker epoch.
+
+    ``paving``: the pose set (outer boxes ``paving.outer``), None when inconsistent;
+    ``q``: GOMNE's minimal number of outliers (None when inconsistent; the set itself is
+    relaxed by ``q_max`` when the settings are ``guaranteed``); ``mode``: ``"global"`` or ``"track"``
+    (the search that produced the set); ``relocalised``: tracking failed this epoch and the
+    set comes from a global search.
+    """
+
+    paving: Subpaving | None
+    q: int | None
+    mode: str
+    relocalised: bool = False
+
+    @property
+    def consistent(self) -> bool:
+        """False when no set with at most ``q_max`` outliers explains the scan."""
+        return self.paving is not None
+
+
+def global_box(map_bounds) -> np.ndarray:
+    """Pose box ``(3, 2)``: the map bounds ``(2, 2)`` and every heading ``[-pi, pi]``."""
+    b = np.asarray(map_bounds, dtype=np.float64)
+    if b.shape != (2, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
+        raise IntervalError(f"map bounds must be a finite (2, 2) box, got {b.tolist()}")
+    return np.array([b[0], b[1], [-np.pi, np.pi]])
+
+
+@dataclass(frozen=True)
+class IntervalTracker:
+    """The tracker's fixed parts; :meth:`step` is pure (previous set in, result out).
+
+    ``settings``; ``map_bounds (2, 2)`` for the global search; ``motion``: the IMAGESP
+    inclusion function ``(boxes (N, 3, 2), dt_s) -> (N, 3, 2)`` (None: inflation by the
+    physical limits, the paper's prediction).
+    """
+
+    settings: TrackerSettings
+    map_bounds: np.ndarray
+    motion: Callable[[np.ndarray, float], np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "map_bounds", global_box(self.map_bounds)[:2])
+
+    def limits(self, boxes: np.ndarray, dt_s: float) -> np.ndarray:
+        """Boxes grown by the physical limits: ``v_max dt`` in x and y, ``omega_max dt`` in
+        heading (every pose reachable in ``dt_s`` from a pose of the box)."""
+        s = self.settings
+        reach = s.v_max_m_s * dt_s
+        return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
+
+    def predict(self, previous: Subpaving, dt_s: float) -> np.ndarray:
+        """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``."""
+        if not (np.isfinite(dt_s) and dt_s >= 0):
+            raise IntervalError(f"tracker: dt_s must be finite and >= 0, got {dt_s!r}")
+        boxes = previous.outer
+        boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+        s = self.settings
+        if s.tracker == "sivia":
+            return wrap_headings(self.limits(hull(boxes)[None], dt_s))
+        motion = self.motion if self.motion is not None else self.limits
+        scale = pose_scale(s.heading_scale_m_per_rad)
+        cells = imagesp(lambda b: motion(b, dt_s), boxes, s.eps_m, scale,
+                        pitch=s.imagesp_pitch_m / scale)
+        return wrap_headings(cells)
+
+    def _search(self, scan: SonarScan, initial: np.ndarray):
+        s = self.settings
+        return gomne(scan, initial, s.eps_m, s.q_max, s.heading_scale_m_per_rad,
+                     guaranteed=s.guaranteed)
+
+    def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
+        """One epoch from the previous set (None: start or lost, search globally): track,
+        GOMNE, relocalise globally when the tracked set is empty at ``q_max``."""
+        whole = global_box(self.map_bounds)
+        if previous is None or previous.is_empty:
+            found = self._search(scan, whole)
+            return EpochResult(found.paving if found.consistent else None, found.q, "global")
+        found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
+        if found.consistent:
+            inner, boundary = found.paving.inner, found.paving.boundary
+            paving = Subpaving(wrap_headings(inner), wrap_headings(boundary))
+            return EpochResult(paving, found.q, "track")
+        found = self._search(scan, whole)
+        paving = found.paving if found.consistent else None
+        return EpochResult(paving, found.q, "global", relocalised=True)

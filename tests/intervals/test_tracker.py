@@ -1,0 +1,99 @@
+"""The interval tracker on a synthetic circuit in ``hall``: containment, kidnapping, outliers."""
+
+import numpy as np
+import pytest
+
+from intervals.errors import IntervalError
+from intervals.sonar import SonarBelt, SonarScan
+from intervals.boxes import unwrap_headings
+from intervals.tracker import IntervalTracker, TrackerSettings
+from robotsim.maps import builtin_map
+from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+
+PARAMS = SonarBeltParams.default_belt()
+HALL = builtin_map("hall")
+BELT = SonarBelt.from_params(PARAMS)
+
+
+def _circuit(epochs: int) -> np.ndarray:
+    """Poses ``(epochs, 3)`` at 1 s intervals on a circle of radius 2 m at 0.3 m/s (CCW)."""
+    omega = 0.3 / 2.0
+    t = np.arange(epochs, dtype=float)
+    heading = np.mod(omega * t + np.pi / 2 + np.pi, 2 * np.pi) - np.pi
+    return np.stack([4.5 + 2.0 * np.cos(omega * t), 3.8 + 2.0 * np.sin(omega * t), heading], 1)
+
+
+def _scan(truth, rng, outliers=0):
+    d = cone_distances(truth, HALL.segments, PARAMS.mount_xy, PARAMS.mount_angle_rad,
+                       PARAMS.half_aperture_rad)
+    bound = PARAMS.error_abs_bound_m + PARAMS.error_rel_bound * np.where(np.isfinite(d), d, 0)
+    m = np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0.0)
+    m = np.where(d > PARAMS.d_max_m, np.inf, m)
+    if outliers:
+        finite = np.flatnonzero(np.isfinite(m))
+        bad = rng.choice(finite, size=outliers, replace=False)
+        m[bad] = np.where(m[bad] > 1.5, m[bad] - 1.2, m[bad] + 1.2)
+    return SonarScan(HALL.segments, BELT, m, HALL.boundary)
+
+
+def _tracker(kind, q_max=1, guaranteed=True):
+    settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=q_max, tracker=kind,
+                               guaranteed=guaranteed)
+    return IntervalTracker(settings, HALL.bounds)
+
+
+def test_both_trackers_keep_the_truth_and_imagesp_is_not_looser():
+    rng = np.random.default_rng(3)
+    poses = _circuit(14)
+    scans = [_scan(p, rng, outliers=int(i % 5 == 3)) for i, p in enumerate(poses)]
+    areas = {}
+    for kind in ("sivia", "imagesp"):
+        tracker, previous, area = _tracker(kind), None, []
+        for i, (truth, scan) in enumerate(zip(poses, scans)):
+            result = tracker.step(previous, scan, 1.0)
+            assert result.consistent and not result.relocalised
+            assert result.mode == ("global" if i == 0 else "track")
+            assert result.paving.contains(truth[None])[0], (kind, i)
+            assert result.q <= 1
+            previous = result.paving
+            area.append(result.paving.area_xy())
+        areas[kind] = np.mean(area[1:])
+    assert areas["imagesp"] <= areas["sivia"] * 1.05
+
+
+def test_kidnapping_is_detected_and_relocalised():
+    rng = np.random.default_rng(4)
+    tracker, previous = _tracker("sivia", q_max=0), None
+    for truth in _circuit(3):
+        previous = tracker.step(previous, _scan(truth, rng), 1.0).paving
+    kidnapped = np.array([8.0, 6.5, -2.0])  # 4 m away: out of reach of v_max dt
+    result = tracker.step(previous, _scan(kidnapped, rng), 1.0)
+    assert result.relocalised and result.mode == "global" and result.consistent
+    assert result.paving.contains(kidnapped[None])[0]
+
+
+def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
+    rng = np.random.default_rng(5)
+    tracker = _tracker("sivia", q_max=0)
+    truth = _circuit(1)[0]
+    first = tracker.step(None, _scan(truth, rng), 1.0)
+    # every sensor sees a wall at 1 m: nowhere in the hall (checked globally below)
+    absurd = SonarScan(HALL.segments, BELT, np.full(16, 1.0), HALL.boundary)
+    bad = tracker.step(first.paving, absurd, 1.0)
+    assert not bad.consistent and bad.paving is None and bad.q is None and bad.relocalised
+    again = tracker.step(bad.paving, _scan(truth, rng), 1.0)
+    assert again.mode == "global" and again.paving.contains(truth[None])[0]
+
+
+def test_heading_unwrap_and_settings_errors():
+    boxes = np.array([[[0, 1], [0, 1], [3.0, 3.1]], [[0, 1], [0, 1], [-3.1, -3.0]]])
+    un = unwrap_headings(boxes, 3.05)
+    assert un[1, 2, 0] <= -3.1 + 2 * np.pi and un[1, 2, 1] >= -3.0 + 2 * np.pi
+    assert np.allclose(un[1, 2], [-3.1 + 2 * np.pi, -3.0 + 2 * np.pi])
+    np.testing.assert_array_equal(un[0], boxes[0])
+    for bad in ({"eps_m": 0.0}, {"tracker": "kalman"}, {"q_max": -1}, {"v_max_m_s": -1.0}):
+        kwargs = {"v_max_m_s": 0.5, "omega_max_rad_s": 0.5, **bad}
+        with pytest.raises(IntervalError, match="tracker settings"):
+            TrackerSettings(**kwargs)
+    with pytest.raises(IntervalError, match="map bounds"):
+        IntervalTracker(TrackerSettings(0.5, 0.5), np.zeros((2, 2)))
