@@ -1,4 +1,4 @@
-"""The 1 Hz interval tracker: global localisation, tracking, GOMNE, relocalisation.
+"""The 1 Hz interval tracker: global localisation, tracking, GOMNE, inconsistency, relocalisation.
 
 Paper 002 section 3: the pose set is first found globally (whole map, any heading); at each
 later scan the previous set is predicted *by the robot's physical limits* (it can have moved
@@ -11,15 +11,22 @@ Two predictions are offered (MODELS.md section 4):
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
 
-Outliers: GOMNE raises ``q`` from 0 to ``q_max``. When even ``q_max`` leaves the tracked set
-empty the data are inconsistent with the prediction (a kidnapping, or more outliers than
-``q_max``): the tracker relocalises globally at once; if that is empty too, the epoch is
-reported inconsistent, no set is returned (never clamp to an empty set) and the next epoch
-starts globally again.
+Outliers: q-relaxation and GOMNE (:func:`intervals.sonar.gomne`), up to ``q_max``. Each epoch
+ends in one of :data:`STATUSES`:
+
+* ``"global"``: a global search gave the set (the first epoch, and the one after an epoch
+  without a set);
+* ``"tracking"``: the predicted set, contracted by the scan, is not empty;
+* ``"inconsistent"``: the tracked set is empty even with ``q_max`` outliers (a kidnapping, or
+  more outliers than ``q_max``): no set is returned (never clamp to an empty or invented
+  set) and the next epoch relocalises globally, on a fresh scan (relocalising on the scan
+  that just failed could lock onto a wrong place when the failure came from outliers);
+* ``"lost"``: a global search was empty: no set; the next epoch searches globally again.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -39,6 +46,7 @@ from intervals.imagesp import imagesp
 from intervals.sonar import SonarScan, gomne
 
 TRACKERS = ("sivia", "imagesp")
+STATUSES = ("global", "tracking", "inconsistent", "lost")
 
 
 @dataclass(frozen=True)
@@ -88,22 +96,48 @@ class TrackerSettings:
 class EpochResult:
     """Outcome of one tracker epoch.
 
-    ``paving``: the pose set (outer boxes ``paving.outer``), None when inconsistent;
-    ``q``: GOMNE's minimal number of outliers (None when inconsistent; the set itself is
-    relaxed by ``q_max`` when the settings are ``guaranteed``); ``mode``: ``"global"`` or ``"track"``
-    (the search that produced the set); ``relocalised``: tracking failed this epoch and the
-    set comes from a global search.
+    ``paving``: the pose set, None when the epoch is ``"inconsistent"`` or ``"lost"`` (headings
+    wrapped to ``[-pi, pi]``); ``q``: GOMNE's minimal number of outliers explaining the scan
+    (None without a set; the set itself is relaxed by ``q_max`` when the settings are
+    ``guaranteed``); ``status``: one of :data:`STATUSES`; ``elapsed_s``: wall time of the
+    epoch (timing, not a result).
     """
 
     paving: Subpaving | None
     q: int | None
-    mode: str
-    relocalised: bool = False
+    status: str
+    elapsed_s: float = 0.0
 
     @property
     def consistent(self) -> bool:
         """False when no set with at most ``q_max`` outliers explains the scan."""
         return self.paving is not None
+
+    @property
+    def outer(self) -> np.ndarray:
+        """Outer boxes ``(K, 3, 2)`` (K = 0 without a set)."""
+        return self.paving.outer if self.paving is not None else np.zeros((0, 3, 2))
+
+    @property
+    def inner_mask(self) -> np.ndarray:
+        """``(K,)`` bool: the outer box is proved inside the set (``paving.inner`` first)."""
+        inner = 0 if self.paving is None else self.paving.inner.shape[0]
+        return np.arange(self.outer.shape[0]) < inner
+
+    def components(self) -> tuple[int, np.ndarray]:
+        """Connected components of the outer boxes, heading periodic: ``(count, labels (K,))``."""
+        if self.paving is None:
+            return 0, np.zeros(0, dtype=np.int64)
+        return self.paving.components()
+
+    def hull(self) -> np.ndarray:
+        """Hull ``(3, 2)`` of the outer boxes, headings unwrapped near the first box (a set
+        across the +-pi cut keeps a narrow heading interval, possibly beyond ``pi``); NaN
+        without a set."""
+        boxes = self.outer
+        if boxes.shape[0] == 0:
+            return np.full((3, 2), np.nan)
+        return hull(unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0))
 
 
 def global_box(map_bounds) -> np.ndarray:
@@ -158,17 +192,16 @@ class IntervalTracker:
                      guaranteed=s.guaranteed)
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
-        """One epoch from the previous set (None: start or lost, search globally): track,
-        GOMNE, relocalise globally when the tracked set is empty at ``q_max``."""
-        whole = global_box(self.map_bounds)
+        """One epoch from the previous set (None: the start, or the epoch after one without a
+        set: search globally), on the scan taken ``dt_s`` seconds after the previous one."""
+        start = time.perf_counter()
         if previous is None or previous.is_empty:
-            found = self._search(scan, whole)
-            return EpochResult(found.paving if found.consistent else None, found.q, "global")
-        found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
-        if found.consistent:
-            inner, boundary = found.paving.inner, found.paving.boundary
-            paving = Subpaving(wrap_headings(inner), wrap_headings(boundary))
-            return EpochResult(paving, found.q, "track")
-        found = self._search(scan, whole)
-        paving = found.paving if found.consistent else None
-        return EpochResult(paving, found.q, "global", relocalised=True)
+            found = self._search(scan, global_box(self.map_bounds))
+            status = "global" if found.consistent else "lost"
+        else:
+            found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
+            status = "tracking" if found.consistent else "inconsistent"
+        if not found.consistent:
+            return EpochResult(None, None, status, time.perf_counter() - start)
+        paving = Subpaving(wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary))
+        return EpochResult(paving, found.q, status, time.perf_counter() - start)

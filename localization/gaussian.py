@@ -65,12 +65,10 @@ class Gaussian:
 
         The arrays are made read-only, so a belief stays immutable whoever made it.
         """
-        mean.flags.writeable = False
-        cov.flags.writeable = False
+        mean.setflags(write=False)
+        cov.setflags(write=False)
         belief = object.__new__(cls)
-        object.__setattr__(belief, "mean", mean)
-        object.__setattr__(belief, "cov", cov)
-        object.__setattr__(belief, "angle_indices", angle_indices)
+        belief.__dict__.update(mean=mean, cov=cov, angle_indices=angle_indices)  # frozen: bypass __setattr__
         return belief
 
     @property

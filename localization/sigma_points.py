@@ -34,12 +34,14 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from localization.errors import EstimationError
-from localization.linalg import wrap_angle, wrap_residual
+from localization.linalg import wrap_columns, wrap_residual
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,15 @@ class SigmaWeights:
     c0: float
     deviation_weights: np.ndarray
     offsets: np.ndarray
+
+    @cached_property
+    def half_moment_weights(self) -> np.ndarray:
+        """``(2n + 1,)`` ``Wi / 2`` (``2n`` times), then ``(c0 - 1) / 2``: the weights of the rows of
+        ``[D; d]`` in half the covariance (see :func:`unscented_moments`). Cached, read-only."""
+        weights = np.full(2 * self.n + 1, 0.5 * self.wi)
+        weights[-1] = 0.5 * (self.c0 - 1.0)
+        weights.flags.writeable = False
+        return weights
 
     @property
     def mean_weights(self) -> np.ndarray:
@@ -102,6 +113,24 @@ def _resolved_kappa(owner: str, n: int, kappa: float | None) -> float:
     return kappa
 
 
+def _per_dimension(build: Callable[[object, int], SigmaWeights]) -> Callable[[object, int], SigmaWeights]:
+    """``weights(self, n)`` cached in the instance's ``__dict__`` (a frozen dataclass allows that).
+
+    A dictionary lookup per step: ``functools.lru_cache`` would hash the settings dataclass on
+    every call, a microsecond of a filter step.
+    """
+
+    @functools.wraps(build)
+    def weights(self, n: int) -> SigmaWeights:
+        cache = self.__dict__.setdefault("_weights_by_dimension", {})
+        found = cache.get(n)
+        if found is None:
+            found = cache[n] = build(self, n)
+        return found
+
+    return weights
+
+
 @dataclass(frozen=True)
 class ScaledSigmaPoints:
     """Scaled sigma points (Wan and van der Merwe): ``gamma^2 = alpha^2 (n + kappa)``.
@@ -125,7 +154,7 @@ class ScaledSigmaPoints:
         if self.kappa is not None and not math.isfinite(self.kappa):
             raise EstimationError(f"ScaledSigmaPoints: kappa must be finite or None, got {self.kappa!r}")
 
-    @functools.lru_cache(maxsize=32)  # noqa: B019 - frozen, hashable settings; a few dimensions
+    @_per_dimension
     def weights(self, n: int) -> SigmaWeights:
         """The weights in dimension ``n`` (cached)."""
         kappa = _resolved_kappa("ScaledSigmaPoints", n, self.kappa)
@@ -147,7 +176,7 @@ class KappaSigmaPoints:
         if self.kappa is not None and not math.isfinite(self.kappa):
             raise EstimationError(f"KappaSigmaPoints: kappa must be finite or None, got {self.kappa!r}")
 
-    @functools.lru_cache(maxsize=32)  # noqa: B019 - frozen, hashable settings; a few dimensions
+    @_per_dimension
     def weights(self, n: int) -> SigmaWeights:
         """The weights in dimension ``n`` (cached)."""
         kappa = _resolved_kappa("KappaSigmaPoints", n, self.kappa)
@@ -168,7 +197,7 @@ class SpreadSigmaPoints:
         if not (math.isfinite(self.a) and self.a > 0.0):
             raise EstimationError(f"SpreadSigmaPoints: a must be finite and > 0, got {self.a!r}")
 
-    @functools.lru_cache(maxsize=32)  # noqa: B019 - frozen, hashable settings; a few dimensions
+    @_per_dimension
     def weights(self, n: int) -> SigmaWeights:
         """The weights in dimension ``n`` (cached)."""
         _check_dimension("SpreadSigmaPoints", n)
@@ -207,19 +236,36 @@ def unscented_moments(
         angle_indices: components of the points that are angles (wrapped offsets).
 
     Returns:
-        ``mean (..., m)`` (angles wrapped to ``[-pi, pi)``), ``cov (..., m, m)`` (symmetric up
-        to rounding; the filters symmetrise their results) and the deviations
-        ``D (..., 2n, m)`` of points ``1..2n`` from point 0 (they feed :func:`cross_covariance`).
+        ``mean (..., m)`` (angles wrapped to ``[-pi, pi)``), ``cov (..., m, m)`` (exactly
+        symmetric) and the deviations ``D (..., 2n, m)`` of points ``1..2n`` from point 0
+        (they feed :func:`cross_covariance`).
+
+    The deviations and ``d`` are stacked as ``E = [D; d]`` ``(..., 2n + 1, m)``, so that the
+    covariance is one product ``E^T diag(Wi, .., Wi, c0 - 1) E`` (taken as half of it plus its
+    transpose, which makes it exactly symmetric). A few numpy calls, the same for one run and
+    for a batch: a batch gives the numbers of its runs one by one to the last bit (which
+    matters: with a small ``alpha`` the mean shift amplifies any rounding difference by
+    ``1 / gamma^2``). An angle wrap is skipped when every angle deviation is below 3 rad in
+    magnitude: it would return them unchanged (``rint(d / 2 pi) = 0``), and the check costs
+    half of it.
     """
-    dev = points[..., 1:, :] - points[..., :1, :]
+    k = points.shape[-2] - 1  # 2n
+    stacked = np.empty(points.shape[:-2] + (k + 1, points.shape[-1]))  # E = [D; d]
+    dev = stacked[..., :k, :]
+    np.subtract(points[..., 1:, :], points[..., :1, :], out=dev)
     for i in angle_indices:
-        dev[..., i] = wrap_residual(dev[..., i])
-    shift = weights.deviation_weights @ dev  # d = sum_{i>=1} W_i D_i
+        column = dev[..., i]
+        # the largest |D| (one run: by Python, a third of the cost); a NaN may take either branch
+        largest = max(map(abs, column.tolist())) if column.ndim == 1 else np.abs(column).max(initial=0.0)
+        if not largest < 3.0:
+            dev[..., i] = wrap_residual(column)
+    shift = stacked[..., k, :]
+    np.matmul(weights.deviation_weights, dev, out=shift)  # d = sum_{i>=1} W_i D_i
+    half = (weights.half_moment_weights[:, None] * stacked).mT @ stacked
+    cov = half + half.mT  # Wi D^T D + (c0 - 1) d d^T
     mean = points[..., 0, :] + shift
-    for i in angle_indices:
-        mean[..., i] = wrap_angle(mean[..., i])
-    cov = (weights.wi * dev.mT) @ dev
-    cov += ((weights.c0 - 1.0) * shift)[..., :, None] * shift[..., None, :]
+    if angle_indices:
+        wrap_columns(mean, angle_indices)
     return mean, cov, dev
 
 

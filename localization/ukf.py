@@ -24,6 +24,14 @@ belief, as in paper 004 eq. 8)::
 are taken about the centre sigma point (see :mod:`localization.sigma_points`), which keeps
 paper 001's ``alpha = 1e-5`` exact. Angles declared in the belief and in the measurement
 model are wrapped in every residual and mean.
+
+Speed (``benchmarks/ukf_step.py``). A step is a few dozen numpy calls whatever the batch
+size, so one run pays mostly call overheads: its Cholesky factor and solve go to LAPACK
+directly, the moments are a handful of products (:func:`~localization.sigma_points.unscented_moments`),
+and the checks are cheap finiteness tests of the inputs and the new mean. One run and a batch take the same
+floating-point operations, so a batch gives its runs' numbers to the last bit (with a small
+``alpha`` the mean shift would amplify any rounding difference by ``1 / gamma^2``). Long
+batches are stepped in slices of :data:`SLICE_RUNS` runs.
 """
 
 from __future__ import annotations
@@ -35,7 +43,7 @@ import numpy as np
 
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
-from localization.linalg import PDPolicy, cholesky, require_finite, wrap_columns
+from localization.linalg import PDPolicy, cholesky, require_finite, solve, wrap_columns
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import (
     ScaledSigmaPoints,
@@ -75,15 +83,53 @@ def kalman_correction(
     mean: np.ndarray, cov: np.ndarray, innovation: np.ndarray, cross_cov: np.ndarray, innovation_cov: np.ndarray,
     angle_indices: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``x + K y`` and ``P - Pxz K^T`` with ``K = Pxz S^-1`` from ``solve`` (shared by UKF variants).
+    """``x + K y`` and ``P - Pxz K^T`` (symmetrised) with ``K = Pxz S^-1`` solved (shared by UKF variants).
 
     Shapes: ``mean (..., n)``, ``cov (..., n, n)``, ``innovation (..., m)``, ``cross_cov (..., n, m)``,
-    ``innovation_cov (..., m, m)``.
+    ``innovation_cov (..., m, m)``. The same LU solve for one run and for a batch (see
+    :func:`~localization.linalg.solve`).
     """
-    gain_t = np.linalg.solve(innovation_cov, cross_cov.mT)  # K^T = S^-1 Pxz^T
-    new_mean = wrap_columns(mean + (innovation[..., None, :] @ gain_t)[..., 0, :], angle_indices)
+    gain_t = solve(innovation_cov, cross_cov.mT)  # K^T = S^-1 Pxz^T
+    new_mean = mean + (innovation[..., None, :] @ gain_t)[..., 0, :]
     new_cov = cov - cross_cov @ gain_t
-    return new_mean, 0.5 * (new_cov + new_cov.mT)
+    new_cov += new_cov.mT  # symmetrised in place: (P + P^T) / 2
+    new_cov *= 0.5
+    return wrap_columns(new_mean, angle_indices), new_cov
+
+
+#: Batches of more runs than this are stepped in slices of at most this many runs. Every
+#: operation is per run, so the numbers are the same bit for bit; the slices keep each
+#: temporary array (``(runs, 2n + 1, n)`` sigma points and images) small enough to stay in the
+#: CPU cache and on the malloc heap. A 1000-run CTRV step in one piece spends about a fifth
+#: of its time in page faults: glibc returns such arrays to the system after every step and
+#: faults them in again (measured in ``benchmarks/ukf_step.py``).
+SLICE_RUNS = 512
+
+
+def run_slices(batch_shape: tuple[int, ...], noise_cov: np.ndarray) -> list[slice] | None:
+    """Near-equal slices of at most :data:`SLICE_RUNS` runs, or ``None`` (step in one piece).
+
+    Only a flat batch ``(B,)`` longer than :data:`SLICE_RUNS` with a shared noise covariance
+    ``(k, k)`` is sliced.
+    """
+    if len(batch_shape) != 1 or batch_shape[0] <= SLICE_RUNS or noise_cov.ndim != 2:
+        return None
+    runs = batch_shape[0]
+    count = -(-runs // SLICE_RUNS)
+    edges = [runs * i // count for i in range(count + 1)]
+    return [slice(start, stop) for start, stop in zip(edges[:-1], edges[1:])]
+
+
+def sliced_args(args: tuple, runs: int, part: slice) -> tuple:
+    """The step's arguments for the runs ``part``: per-run arrays (leading axis ``runs``) sliced."""
+    return tuple(a[part] if isinstance(a, np.ndarray) and a.shape[:1] == (runs,) else a for a in args)
+
+
+def joined(beliefs: list[Gaussian], angle_indices: tuple[int, ...]) -> Gaussian:
+    """One belief from the beliefs of consecutive slices of a batch."""
+    mean = np.concatenate([b.mean for b in beliefs])
+    cov = np.concatenate([b.cov for b in beliefs])
+    return Gaussian.trusted(mean, cov, angle_indices)
 
 
 @dataclass(frozen=True)
@@ -106,28 +152,33 @@ class UnscentedKalmanFilter:
             EstimationError: non-finite ``args`` or result, or a covariance that is not
                 positive definite under the ``"raise"`` policy.
         """
+        mean = belief.mean
+        n = mean.shape[-1]
+        batch = mean.shape[:-1]
+        if len(batch) == 1 and batch[0] > SLICE_RUNS and (parts := run_slices(batch, model.Q)):
+            steps = [self.predict(belief[part], model, *sliced_args(args, batch[0], part)) for part in parts]
+            return joined(steps, belief.angle_indices)
         check_args(args, "UKF predict")
-        n = belief.mean.shape[-1]
         chol, _ = cholesky(belief.cov, self.pd_policy, "UKF predict")
         if model.noise == "additive":
             weights = self.points.weights(n)
-            images = model.f(sigma_points(belief.mean, chol, weights), *at_sigma_points(args, belief.mean.shape[:-1]))
+            images = model.f(sigma_points(mean, chol, weights), *at_sigma_points(args, batch))
         else:
             q = model.Q.shape[-1]
             weights = self.points.weights(n + q)
-            batch = belief.mean.shape[:-1]
-            mean_aug = np.concatenate([belief.mean, np.zeros(batch + (q,))], axis=-1)
+            mean_aug = np.zeros(batch + (n + q,))
+            mean_aug[..., :n] = mean
             chol_aug = np.zeros(batch + (n + q, n + q))  # a square root of blockdiag(P, Q)
             chol_aug[..., :n, :n] = chol
             chol_aug[..., n:, n:] = model.noise_sqrt
             points = sigma_points(mean_aug, chol_aug, weights)
             images = model.f(points[..., :n], points[..., n:], *at_sigma_points(args, batch))
-        mean, cov, _ = unscented_moments(images, weights, belief.angle_indices)
+        angles = belief.angle_indices
+        mean, cov, _ = unscented_moments(images, weights, angles)
         if model.noise == "additive":
-            cov = cov + model.Q  # paper 004 eq. 6
-        cov = 0.5 * (cov + cov.mT)
+            cov = cov + model.Q  # paper 004 eq. 6 (both exactly symmetric)
         require_finite(mean, "the predicted mean (model output)", "UKF predict")
-        return Gaussian.trusted(mean, cov, belief.angle_indices)
+        return Gaussian.trusted(mean, cov, angles)
 
     def update(self, belief: Gaussian, z: np.ndarray, model: MeasurementModel, *args) -> Gaussian:
         """The belief corrected by the measurement ``z (..., m)``.
@@ -136,22 +187,24 @@ class UnscentedKalmanFilter:
             EstimationError: non-finite ``z``, ``args`` or result, or a covariance that is not
                 positive definite under the ``"raise"`` policy.
         """
+        mean = belief.mean
+        batch = mean.shape[:-1]
+        if (
+            len(batch) == 1 and batch[0] > SLICE_RUNS and (parts := run_slices(batch, model.R))
+            and isinstance(z, np.ndarray) and z.shape == batch + model.R.shape[-1:]  # else refused whole
+        ):
+            steps = [self.update(belief[part], z[part], model, *sliced_args(args, batch[0], part)) for part in parts]
+            return joined(steps, belief.angle_indices)
         require_finite(z, "the measurement z", "UKF update")
         check_args(args, "UKF update")
-        weights = self.points.weights(belief.mean.shape[-1])
+        weights = self.points.weights(mean.shape[-1])
         chol, prior_cov = cholesky(belief.cov, self.pd_policy, "UKF update")
-        points = sigma_points(belief.mean, chol, weights)
-        z_pred, s_cov, dev_z = unscented_moments(
-            model.h(points, *at_sigma_points(args, belief.mean.shape[:-1])), weights, model.angle_indices
-        )
+        images = model.h(sigma_points(mean, chol, weights), *at_sigma_points(args, mean.shape[:-1]))
+        z_pred, s_cov, dev = unscented_moments(images, weights, model.angle_indices)
+        s_cov = s_cov + model.R
         mean, cov = kalman_correction(
-            belief.mean,
-            prior_cov,
-            model.residual(z, z_pred, "UKF update"),
-            cross_covariance(chol, dev_z, weights),
-            s_cov + model.R,
+            mean, prior_cov, model.residual(z, z_pred, "UKF update"), cross_covariance(chol, dev, weights), s_cov,
             belief.angle_indices,
         )
         require_finite(mean, "the updated mean", "UKF update")
         return Gaussian.trusted(mean, cov, belief.angle_indices)
-

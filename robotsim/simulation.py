@@ -14,6 +14,7 @@ limits (``v_max``, ``omega_max``, ``a_max``) and handed to the world.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,6 +71,8 @@ class SimulationLog:
         echo; sonar_fault (M, k) bool (outlier or lost echo; truth, tests only);
         sonar_true_range_m (M, k) exact cone distances, no range limit (truth).
     kidnap_t_s (K,): the sample times at which the robot was kidnapped.
+    wall_contact (N,) bool: pymunk resolved a contact between the robot and a wall during
+    the step that starts at the sample (the last sample, which no step follows, is False).
     """
 
     t_s: np.ndarray
@@ -87,6 +90,7 @@ class SimulationLog:
     sonar_fault: np.ndarray
     sonar_true_range_m: np.ndarray
     kidnap_t_s: np.ndarray
+    wall_contact: np.ndarray
     rate_hz: float
     robot: RobotParams
     sensors: SensorSuite
@@ -109,6 +113,7 @@ def simulate(
     sensors: SensorSuite = SensorSuite(),
     world: WorldParams = WorldParams(),
     kidnaps: tuple[KidnapEvent, ...] = (),
+    progress: Callable[[float], None] | None = None,
 ) -> SimulationLog:
     """Simulate ``duration_s`` seconds of the robot following ``plan`` in ``segment_map``.
 
@@ -120,6 +125,8 @@ def simulate(
         rng: the only source of randomness (sensor noise and faults).
         robot, sensors, world: settings.
         kidnaps: teleports during the run.
+        progress: told the fraction of the physics loop done (0 to 1, in steps of about
+            1 %), for a progress bar; the sensors after the loop take a small share.
 
     Raises:
         RobotsimError: a bad duration, or a start or kidnap pose that collides with a wall.
@@ -131,7 +138,7 @@ def simulate(
     sim_world = World(segment_map, robot, start_pose, world)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
 
-    states, commands = _run_physics(sim_world, plan.controller(robot), robot, count, schedule)
+    states, commands, contact = _run_physics(sim_world, plan.controller(robot), robot, count, schedule, progress)
     t_s = np.arange(count) / rate_hz
     pose = np.column_stack([states[:, :2], wrap_angle(states[:, 2])])
     velocity = states[:, 3:5]
@@ -172,6 +179,7 @@ def simulate(
         sonar_fault=fault,
         sonar_true_range_m=true_range,
         kidnap_t_s=t_s[kidnapped],
+        wall_contact=contact,
         rate_hz=rate_hz,
         robot=robot,
         sensors=sensors,
@@ -192,9 +200,18 @@ def _kidnap_schedule(kidnaps, rate_hz: float, count: int, sim_world: World) -> d
     return schedule
 
 
-def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, schedule):
-    """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega)
-    and the wanted commands ``(count, 2)``."""
+#: Number of progress reports over a run's physics loop.
+PROGRESS_REPORTS = 100
+
+
+def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, schedule, progress=None):
+    """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
+    the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
+
+    Contacts come from pymunk: a ``post_solve`` handler on every pair of shapes (the robot's
+    disk is the only dynamic shape, so every solved contact is the robot against a wall)
+    sets a flag that the loop reads and clears after each step.
+    """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
     to_true = body_velocity(
@@ -205,9 +222,20 @@ def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, s
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
     states = [None] * count
     commands = [None] * count
+    touched = [False]
+
+    def note_contact(arbiter, space, data) -> None:
+        touched[0] = True
+
+    # World keeps its pymunk space private; the handler only observes (it changes nothing)
+    sim_world._space.on_collision(None, None, post_solve=note_contact)
+    contact = np.zeros(count, dtype=bool)
+    report_every = max(1, count // PROGRESS_REPORTS)
     target = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
     for k in range(count):
+        if progress is not None and k % report_every == 0:
+            progress(k / count)
         if k in schedule:
             sim_world.teleport(schedule[k])
         x, y, theta, v, omega = states[k] = state()
@@ -218,5 +246,10 @@ def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, s
             wanted_v * vv + wanted_omega * vw, wanted_v * wv + wanted_omega * ww, target, dt_s, robot
         )
         step(*target)
+        if touched[0]:
+            contact[k] = True
+            touched[0] = False
+    if progress is not None:
+        progress(1.0)
     commands[-1] = commands[-2] if count > 1 else (0.0, 0.0)
-    return np.array(states), np.array(commands, dtype=np.float64)
+    return np.array(states), np.array(commands, dtype=np.float64), contact

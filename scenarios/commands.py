@@ -19,8 +19,9 @@ from scenarios.spec import DEFAULT_MAP, builtin_names, load_scenario
 #: Where ``robotsim run`` writes when no path is given.
 DEFAULT_RUNS_DIR = Path("runs")
 
-#: The part of the progress bar the simulation fills; the recording fills the rest.
-SIMULATION_SHARE = 0.85
+#: The part of the progress bar the run (simulation and estimation) fills; the recording
+#: fills the rest.
+RUN_SHARE = 0.9
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,7 +44,7 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``robotsim run``: simulate, summarise, record; returns the exit status."""
+    """``robotsim run``: simulate, localise, summarise, record; returns the exit status."""
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
 
@@ -55,10 +56,10 @@ def run(args: argparse.Namespace) -> int:
     bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
     start = time.perf_counter()
     try:
-        result = run_scenario(spec, progress=(lambda done: bar.update(SIMULATION_SHARE * done)) if bar else None)
+        result = run_scenario(spec, progress=(lambda done: bar.update(RUN_SHARE * done)) if bar else None)
         with outputs.atomic_path(rrd_path) as rrd_tmp, outputs.atomic_path(summary_path) as summary_tmp:
             recording_start = time.perf_counter()
-            write_recording(rrd_tmp, spec, result.log)
+            write_recording(rrd_tmp, spec, result.log, result.estimation)
             recording_s = time.perf_counter() - recording_start
             if bar:
                 bar.update(1.0)
@@ -68,9 +69,11 @@ def run(args: argparse.Namespace) -> int:
         if bar:
             bar.close()
     timing = summary["timing"]
+    rmse = summary["rmse_position_m"]
     print(
-        f"{spec.name}: {spec.run.duration_s:g} s simulated in {timing['wall_s']:.2f} s "
-        f"({timing['realtime_factor']:.0f}x real time); wrote {rrd_path} and {summary_path}"
+        f"{spec.name}: {spec.run.duration_s:g} s simulated and localised in {timing['wall_s']:.2f} s "
+        f"({timing['realtime_factor']:.0f}x real time); containment {summary['containment']}, position RMSE "
+        f"UKF-only {rmse['ukf_only']:.3f} m, fused {rmse['fused']:.3f} m; wrote {rrd_path} and {summary_path}"
     )
     return 0
 

@@ -14,8 +14,11 @@ import numpy as np
 from robotsim.maps import point_segment_distance
 from robotsim.sensors.imu import specific_force
 
+from scenarios.epochs import STATUS
+
 if TYPE_CHECKING:
     from robotsim.simulation import SimulationLog
+    from scenarios.epochs import EpochLog
     from scenarios.spec import ScenarioSpec
 
 
@@ -32,6 +35,7 @@ def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         "final_pose": [float(v) for v in log.pose[-1]],
     }
     summary["walls"] = wall_stats(log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m)
+    summary["walls"]["pymunk_contact_steps"] = int(np.count_nonzero(log.wall_contact))
     summary["sensors"] = {
         "encoders": encoder_stats(log.wheel_ticks),
         "gyro": gyro_stats(log.gyro_rad_s, log.velocity[:, 1]),
@@ -110,3 +114,43 @@ def sonar_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         if (bound > 0).all():
             stats["error_bound_share_max"] = float((error / bound).max())
     return stats
+
+
+def rmse_position_m(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Root mean square of the position error of ``estimate (N, 3)`` against ``truth (N, 3)``."""
+    return float(np.sqrt(np.mean(np.sum((estimate[:, :2] - truth[:, :2]) ** 2, axis=1))))
+
+
+def rmse_heading_rad(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Root mean square of the heading error, wrapped to ``[-pi, pi)``, radians."""
+    error = np.mod(estimate[:, 2] - truth[:, 2] + np.pi, 2.0 * np.pi) - np.pi
+    return float(np.sqrt(np.mean(error**2)))
+
+
+def interval_stats(epochs: EpochLog) -> dict[str, Any]:
+    """Figures of the interval epochs (no timing): containment of the truth, box sizes, ``q``.
+
+    ``containment`` is over the epochs that produced a set (an ``inconsistent`` or ``lost``
+    epoch has none; they are counted in ``empty_epochs``); the box figures are means over those epochs of the hull
+    of the outer set (``mean_width_m``: its larger position width) and of the (x, y) area of
+    the union of the outer boxes (``mean_area_m2``).
+    """
+    has_set = epochs.has_set
+    with_set = int(has_set.sum())
+    hull_w = epochs.hull[has_set, :2, 1] - epochs.hull[has_set, :2, 0]
+    counts = {name: int(np.count_nonzero(epochs.status == code)) for code, name in enumerate(STATUS)}
+    return {
+        "epochs": int(len(epochs.t_s)),
+        "containment": float(epochs.contains_truth[has_set].mean()) if with_set else None,
+        "box": {
+            "mean_width_m": float(hull_w.max(axis=1).mean()) if with_set else None,
+            "mean_hull_area_m2": float(np.prod(hull_w, axis=1).mean()) if with_set else None,
+            "mean_area_m2": float(epochs.area_m2[has_set].mean()) if with_set else None,
+            "mean_boxes": float(epochs.box_counts[has_set].mean()) if with_set else None,
+            "max_components": int(epochs.components.max()) if len(epochs.t_s) else 0,
+        },
+        "q_used_max": int(epochs.q_used.max()) if len(epochs.t_s) else 0,
+        "empty_epochs": counts["inconsistent"] + counts["lost"],
+        "lost_epochs": counts["lost"],
+        "epoch_status": counts,
+    }

@@ -17,7 +17,24 @@ Entity paths (the tests read them back):
 - ``sensors/accelerometer/x_m_s2``, ``.../y_m_s2``: body-frame specific force, ``Scalars`` (N);
 - ``truth/v_m_s``, ``truth/omega_rad_s``: true body velocity, ``Scalars`` (N).
 
-The default blueprint puts the 2-D map view beside the time series.
+The localisation pipeline (when the run has an estimation):
+
+- ``world/intervals/boxes``: the (x, y) projections of the outer boxes of each epoch,
+  ``Boxes2D`` (E rows of K boxes; inner boxes drawn in another colour);
+- ``world/intervals/hull``: the hull of each epoch's outer set, ``Boxes2D`` (E rows; an
+  inconsistent or lost epoch has none);
+- ``world/estimates/ukf_only/path``, ``world/estimates/fused/path``: static trajectories;
+- ``world/estimates/<branch>/position``: ``Points2D`` at every ``ESTIMATE_STRIDE``-th sample;
+- ``world/estimates/<branch>/ellipse``: the ``ELLIPSE_SIGMA``-sigma position covariance
+  ellipse, ``LineStrips2D`` at the same samples;
+- ``intervals/box_width_m``, ``intervals/area_m2``, ``intervals/q_used``,
+  ``intervals/epoch_ms``, ``intervals/status`` (the index of ``scenarios.epochs.STATUS``:
+  0 global, 1 tracking, 2 inconsistent, 3 lost): per-epoch figures, ``Scalars`` (E);
+- ``errors/position_m/<branch>``, ``errors/heading_rad/<branch>``: estimation errors,
+  ``Scalars`` at the same samples as the estimates.
+
+The default blueprint puts the 2-D map view (map, truth, boxes and both estimates) beside
+the time series.
 """
 
 from __future__ import annotations
@@ -29,9 +46,13 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from scenarios.runner import BRANCHES
+
 if TYPE_CHECKING:
     from robotsim.sensors.sonar import SonarBeltParams
     from robotsim.simulation import SimulationLog
+    from scenarios.epochs import EpochLog
+    from scenarios.runner import Estimation
     from scenarios.spec import ScenarioSpec
 
 APPLICATION_ID = "robotsim"
@@ -45,13 +66,28 @@ TRUTH_COLOR = (60, 200, 80)
 CONE_ECHO_COLOR = (90, 160, 255)
 CONE_NO_ECHO_COLOR = (90, 90, 90)
 ECHO_COLOR = (255, 140, 0)
+BOX_COLOR = (230, 60, 60)
+INNER_BOX_COLOR = (255, 170, 170)
+HULL_COLOR = (150, 30, 30)
+BRANCH_COLORS = {"ukf_only": (80, 120, 255), "fused": (255, 200, 0)}
+
+#: The estimates are drawn at every this many samples (10 Hz at the default 100 Hz).
+ESTIMATE_STRIDE = 10
+#: Points on each covariance ellipse, and its size in standard deviations.
+ELLIPSE_POINTS = 25
+ELLIPSE_SIGMA = 2.0
 
 
-def write_recording(path: str | Path, spec: ScenarioSpec, log: SimulationLog) -> None:
-    """Write the recording of ``log`` (a run of ``spec``) to the ``.rrd`` file ``path``."""
+def write_recording(
+    path: str | Path, spec: ScenarioSpec, log: SimulationLog, estimation: Estimation | None = None
+) -> None:
+    """Write the recording of ``log`` (a run of ``spec``) and of its ``estimation`` (if any)
+    to the ``.rrd`` file ``path``."""
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
     rec.save(path, default_blueprint=default_blueprint())
     record_run(rec, spec, log)
+    if estimation is not None:
+        record_estimation(rec, log, estimation)
     rec.flush()
     rec.disconnect()
 
@@ -66,6 +102,8 @@ def default_blueprint() -> rrb.Blueprint:
                 rrb.TimeSeriesView(origin="sensors/gyro", name="gyro (rad/s)"),
                 rrb.TimeSeriesView(origin="sensors/accelerometer", name="accelerometer (m/s²)"),
                 rrb.TimeSeriesView(origin="truth", name="true velocity"),
+                rrb.TimeSeriesView(origin="intervals", name="interval epochs (box size, q, time)"),
+                rrb.TimeSeriesView(origin="errors", name="estimation errors"),
             ),
             column_shares=[3, 2],
         ),
@@ -202,3 +240,75 @@ def record_proprioceptive(
     }
     for entity, values in series.items():
         rec.send_columns(entity, indexes=times, columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)))
+
+
+def record_estimation(rec: rr.RecordingStream, log: SimulationLog, estimation: Estimation) -> None:
+    """The interval sets, both branches' estimates with their ellipses, and the per-epoch
+    figures of one run."""
+    record_interval_sets(rec, estimation.epochs)
+    every = slice(None, None, ESTIMATE_STRIDE)
+    times = [rr.TimeColumn(TIMELINE, duration=log.t_s[every])]
+    truth = log.pose[every]
+    for b, branch in enumerate(BRANCHES):
+        pose, cov = estimation.pose[b], estimation.pose_cov[b]
+        color = BRANCH_COLORS[branch]
+        base = f"world/estimates/{branch}"
+        rec.log(f"{base}/path", rr.LineStrips2D([np.ascontiguousarray(pose[:, :2])], colors=color, radii=0.01), static=True)
+        shown = pose[every]
+        rec.send_columns(f"{base}/position", indexes=times, columns=rr.Points2D.columns(positions=shown[:, :2]))
+        rec.log(f"{base}/position", rr.Points2D.from_fields(colors=color, radii=0.05), static=True)
+        outlines = covariance_ellipses(shown[:, :2], cov[every, :2, :2])
+        rec.send_columns(f"{base}/ellipse", indexes=times, columns=rr.LineStrips2D.columns(strips=outlines))
+        rec.log(f"{base}/ellipse", rr.LineStrips2D.from_fields(colors=color, radii=0.01), static=True)
+        error_xy = np.linalg.norm(shown[:, :2] - truth[:, :2], axis=1)
+        error_theta = np.abs(np.mod(shown[:, 2] - truth[:, 2] + np.pi, 2.0 * np.pi) - np.pi)
+        rec.send_columns(f"errors/position_m/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_xy))
+        rec.send_columns(f"errors/heading_rad/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_theta))
+
+
+def covariance_ellipses(centres: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Closed outlines ``(S, ELLIPSE_POINTS, 2)`` of the ``ELLIPSE_SIGMA`` ellipses of the
+    position covariances ``cov (S, 2, 2)`` about ``centres (S, 2)``:
+    ``c + ELLIPSE_SIGMA * L u`` for ``u`` round the unit circle, ``L L^T = cov``."""
+    angle = np.linspace(0.0, 2.0 * np.pi, ELLIPSE_POINTS)
+    circle = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (A, 2)
+    values, vectors = np.linalg.eigh(cov)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]  # (S, 2, 2), root root^T = cov
+    return centres[:, None, :] + ELLIPSE_SIGMA * circle @ root.mT
+
+
+def record_interval_sets(rec: rr.RecordingStream, epochs: EpochLog) -> None:
+    """The outer boxes and hull of every epoch, and the per-epoch figures as time series."""
+    if len(epochs.t_s) == 0:
+        return
+    times = [rr.TimeColumn(TIMELINE, duration=epochs.t_s)]
+    boxes = epochs.boxes
+    centres = 0.5 * (boxes[:, :2, 0] + boxes[:, :2, 1])
+    half = 0.5 * (boxes[:, :2, 1] - boxes[:, :2, 0])
+    colors = np.where(epochs.inner[:, None], INNER_BOX_COLOR, BOX_COLOR).astype(np.uint8)
+    rec.send_columns(
+        "world/intervals/boxes",
+        indexes=times,
+        columns=rr.Boxes2D.columns(centers=centres, half_sizes=half, colors=colors).partition(epochs.box_counts),
+    )
+    has_set = epochs.has_set
+    hull = np.where(has_set[:, None, None], epochs.hull, 0.0)
+    rec.send_columns(
+        "world/intervals/hull",
+        indexes=times,
+        columns=rr.Boxes2D.columns(
+            centers=0.5 * (hull[has_set, :2, 0] + hull[has_set, :2, 1]),
+            half_sizes=0.5 * (hull[has_set, :2, 1] - hull[has_set, :2, 0]),
+        ).partition(has_set.astype(np.int64)),
+    )
+    rec.log("world/intervals/hull", rr.Boxes2D.from_fields(colors=HULL_COLOR, radii=0.01), static=True)
+    width = np.max(epochs.hull[:, :2, 1] - epochs.hull[:, :2, 0], axis=1)
+    series = {
+        "intervals/box_width_m": width,
+        "intervals/area_m2": epochs.area_m2,
+        "intervals/q_used": epochs.q_used.astype(np.float64),
+        "intervals/epoch_ms": epochs.elapsed_s * 1e3,
+        "intervals/status": epochs.status.astype(np.float64),
+    }
+    for entity, values in series.items():
+        rec.send_columns(entity, indexes=times, columns=rr.Scalars.columns(scalars=values))

@@ -28,7 +28,12 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     ``mount_angle_rad``. A field named ``*_rad*`` may be written in degrees under the same
     name with ``_deg`` in place of ``_rad`` (``half_aperture_deg``); never both.
 ``[estimation]``
-    Reserved for the localisation pipeline: accepted, but any key in it is refused for now.
+    The localisation pipeline (paper 002): ``filter`` (``"ukf"``; or ``"iukf"``, ``"ekf"``,
+    ``"iekf"``), ``tracker`` (``"sivia"`` or ``"imagesp"``), ``fusion`` (``"clamp"``, the
+    paper's rule, or another rule of ``localization.fusion``), ``eps_m`` (0.05),
+    ``q_max`` (1), ``guaranteed`` (true), ``interval_rate_hz`` (the sonar's rate: an epoch at every scan),
+    ``heading_scale_m_per_rad`` (1.0), ``imagesp_pitch_m`` (0.2) and ``free_space``
+    (default: true exactly when the sonar never loses an echo). See :class:`EstimationSpec`.
 
 Every mistake raises ``ScenarioError(file, "table.key", reason)``.
 """
@@ -47,6 +52,8 @@ from typing import Any
 import numpy as np
 import shapely
 
+from intervals.tracker import TRACKERS
+from localization.fusion import FUSION_RULES
 from robotsim.control import Plan, Route, ScriptedProfile
 from robotsim.errors import RobotsimError
 from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map
@@ -69,7 +76,8 @@ DEFAULT_MAP = "hall"
 #: The plan of a scenario without a route: no motion.
 STAND_STILL = ScriptedProfile(t_s=np.zeros(1), v_m_s=np.zeros(1), omega_rad_s=np.zeros(1))
 
-ESTIMATION_RESERVED = "reserved for the localisation pipeline (no key is accepted yet)"
+#: Filters the dead reckoning may run (``localization``): UKF, iterated UKF, EKF, iterated EKF.
+FILTERS = ("ukf", "iukf", "ekf", "iekf")
 
 
 # ---------------------------------------------------------------------------------------
@@ -104,7 +112,38 @@ class SensorsSpec:
 
 @dataclasses.dataclass(frozen=True)
 class EstimationSpec:
-    """Reserved for the localisation pipeline (issue 5); holds nothing yet."""
+    """Settings of the localisation pipeline (paper 002): dead reckoning at the run's rate,
+    an interval epoch at the sonar scans, the fusion of the two."""
+
+    filter: str = "ukf"
+    """The dead-reckoning filter: one of :data:`FILTERS`."""
+    tracker: str = "sivia"
+    """The interval tracker's prediction: ``"sivia"`` (hull grown by the physical limits,
+    inverted as one box) or ``"imagesp"`` (every box mapped, then contracted)."""
+    fusion: str = "clamp"
+    """The fusion rule of ``localization.fusion``; ``"clamp"`` is the paper's (section 4)."""
+    eps_m: float = 0.05
+    """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m (> 0)."""
+    q_max: int = 1
+    """Largest number of outlying sonar readings GOMNE may assume per epoch (0 to the belt size)."""
+    guaranteed: bool = True
+    """Keep the ``q_max``-relaxed set, which holds the truth whenever a scan has at most
+    ``q_max`` outliers (true), or GOMNE's set at the smallest ``q`` explaining the scan
+    (false: tighter, but outliers that happen to fit another pose make it miss the truth)."""
+    interval_rate_hz: float = 1.0
+    """Interval epochs per second: one every ``sonar.rate_hz / interval_rate_hz`` scans (a
+    whole number); a scenario file's default is the sonar's rate (an epoch at every scan)."""
+    heading_scale_m_per_rad: float = 1.0
+    """Metres per radian when the heading width is compared with position widths."""
+    imagesp_pitch_m: float = 0.2
+    """Grid pitch of the IMAGESP prediction (scaled like ``eps_m``; at least ``eps_m``)."""
+    free_space: bool = True
+    """Use no-echo readings as free space up to ``d_max``: sound only when the sonar never
+    loses an echo, hence the default ``lost_echo_prob == 0``."""
+
+    def scan_stride(self, sonar_rate_hz: float) -> int:
+        """Scans per interval epoch (1: every scan)."""
+        return int(round(sonar_rate_hz / self.interval_rate_hz))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -194,7 +233,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     _check_start(robot_table, segment_map, start_pose, robot)
     plan = _read_route(top.take_table("route"), segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot)
-    estimation = _read_estimation(top.take_table("estimation"))
+    estimation = _read_estimation(top.take_table("estimation"), sensors.sonar)
     top.finish()
     return ScenarioSpec(
         name=name,
@@ -356,11 +395,39 @@ def _read_sonar(table: Table, robot: RobotParams) -> SonarBeltParams:
     return _read_params(table, default)
 
 
-def _read_estimation(table: Table) -> EstimationSpec:
-    """The ``[estimation]`` table: accepted, every key refused until issue 5 defines them."""
-    if table.keys():
-        raise table.error(table.keys()[0], ESTIMATION_RESERVED)
-    return EstimationSpec()
+def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
+    """The ``[estimation]`` table, checked against the sonar belt it will read."""
+    default = EstimationSpec()
+    values = {
+        "filter": table.take_str("filter", default.filter, choices=FILTERS),
+        "tracker": table.take_str("tracker", default.tracker, choices=TRACKERS),
+        "fusion": table.take_str("fusion", default.fusion, choices=FUSION_RULES),
+        "eps_m": table.take_float("eps_m", default.eps_m, above=0.0),
+        "q_max": table.take_int("q_max", default.q_max, minimum=0),
+        "guaranteed": table.take_bool("guaranteed", default.guaranteed),
+        "interval_rate_hz": table.take_float("interval_rate_hz", sonar.rate_hz, above=0.0),
+        "heading_scale_m_per_rad": table.take_float("heading_scale_m_per_rad", default.heading_scale_m_per_rad, above=0.0),
+        "imagesp_pitch_m": table.take_float("imagesp_pitch_m", default.imagesp_pitch_m, above=0.0),
+        "free_space": table.take_bool("free_space", sonar.lost_echo_prob == 0.0),
+    }
+    table.finish()
+    if values["q_max"] > sonar.count:
+        raise table.error("q_max", f"must be at most the number of sonars ({sonar.count}), got {values['q_max']}")
+    if values["free_space"] and sonar.lost_echo_prob > 0.0:
+        raise table.error(
+            "free_space",
+            f"unsound: the sonar loses echoes (sensors.sonar.lost_echo_prob = {sonar.lost_echo_prob:g}), "
+            "so a no-echo reading does not prove free space",
+        )
+    ratio = sonar.rate_hz / values["interval_rate_hz"]
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise table.error(
+            "interval_rate_hz",
+            f"must divide the sonar rate ({sonar.rate_hz:g} Hz) a whole number of times, got {values['interval_rate_hz']:g}",
+        )
+    if values["imagesp_pitch_m"] < values["eps_m"]:
+        raise table.error("imagesp_pitch_m", f"must be >= eps_m ({values['eps_m']:g}), got {values['imagesp_pitch_m']:g}")
+    return EstimationSpec(**values)
 
 
 # ---------------------------------------------------------------------------------------

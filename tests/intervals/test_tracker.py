@@ -1,4 +1,5 @@
-"""The interval tracker on a synthetic circuit in ``hall``: containment, kidnapping, outliers."""
+"""The interval tracker on a synthetic circuit in ``hall``: containment, kidnapping, outliers,
+and what an epoch reports (boxes, inner mask, components, hull, status)."""
 
 import numpy as np
 import pytest
@@ -51,8 +52,8 @@ def test_both_trackers_keep_the_truth_and_imagesp_is_not_looser():
         tracker, previous, area = _tracker(kind), None, []
         for i, (truth, scan) in enumerate(zip(poses, scans)):
             result = tracker.step(previous, scan, 1.0)
-            assert result.consistent and not result.relocalised
-            assert result.mode == ("global" if i == 0 else "track")
+            assert result.consistent and result.status == ("global" if i == 0 else "tracking")
+            assert result.elapsed_s > 0
             assert result.paving.contains(truth[None])[0], (kind, i)
             assert result.q <= 1
             previous = result.paving
@@ -68,8 +69,12 @@ def test_kidnapping_is_detected_and_relocalised():
         previous = tracker.step(previous, _scan(truth, rng), 1.0).paving
     kidnapped = np.array([8.0, 6.5, -2.0])  # 4 m away: out of reach of v_max dt
     result = tracker.step(previous, _scan(kidnapped, rng), 1.0)
-    assert result.relocalised and result.mode == "global" and result.consistent
-    assert result.paving.contains(kidnapped[None])[0]
+    assert result.status == "inconsistent" and not result.consistent and result.q is None
+    assert result.outer.shape == (0, 3, 2) and np.isnan(result.hull()).all()
+    # the next epoch (a fresh scan, moved a little) relocalises globally
+    moved = kidnapped + np.array([0.2, 0.0, 0.1])
+    again = tracker.step(result.paving, _scan(moved, rng), 1.0)
+    assert again.status == "global" and again.paving.contains(moved[None])[0]
 
 
 def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
@@ -80,9 +85,29 @@ def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
     # every sensor sees a wall at 1 m: nowhere in the hall (checked globally below)
     absurd = SonarScan(HALL.segments, BELT, np.full(16, 1.0), HALL.boundary)
     bad = tracker.step(first.paving, absurd, 1.0)
-    assert not bad.consistent and bad.paving is None and bad.q is None and bad.relocalised
-    again = tracker.step(bad.paving, _scan(truth, rng), 1.0)
-    assert again.mode == "global" and again.paving.contains(truth[None])[0]
+    assert not bad.consistent and bad.paving is None and bad.q is None and bad.status == "inconsistent"
+    lost = tracker.step(bad.paving, absurd, 1.0)  # globally absurd too
+    assert lost.status == "lost" and lost.paving is None
+    again = tracker.step(lost.paving, _scan(truth, rng), 1.0)
+    assert again.status == "global" and again.paving.contains(truth[None])[0]
+
+
+def test_an_epoch_reports_its_boxes_components_and_hull():
+    rng = np.random.default_rng(6)
+    truth = _circuit(1)[0]
+    result = _tracker("sivia").step(None, _scan(truth, rng), 1.0)
+    outer = result.outer
+    assert outer.shape[0] == result.inner_mask.shape[0] > 0
+    assert result.inner_mask.sum() == result.paving.inner.shape[0]
+    count, labels = result.components()
+    assert labels.shape == (outer.shape[0],) and set(labels.tolist()) == set(range(count))
+    hull = result.hull()
+    # brute force: every box lies in the hull once its heading is shifted by whole turns
+    shift = 2 * np.pi * np.round((outer[:, 2].mean(axis=1) - hull[2].mean()) / (2 * np.pi))
+    shifted = outer.copy()
+    shifted[:, 2] -= shift[:, None]
+    assert np.all(hull[:, 0] <= shifted[..., 0] + 1e-12) and np.all(shifted[..., 1] <= hull[:, 1] + 1e-12)
+    assert np.any(np.isclose(shifted[..., 0], hull[:, 0]), axis=0).all()
 
 
 def test_heading_unwrap_and_settings_errors():

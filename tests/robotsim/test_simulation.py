@@ -35,13 +35,14 @@ def test_log_layout_matches_the_contract():
         "t_s": (n,), "pose": (n, 3), "velocity": (n, 2), "command": (n, 2), "wheel_ticks": (n, 2),
         "gyro_rad_s": (n,), "accel_m_s2": (n, 2), "gyro_bias_rad_s": (n,), "accel_bias_m_s2": (n, 2),
         "sonar_t_s": (m,), "sonar_pose": (m, 3), "sonar_range_m": (m, k), "sonar_fault": (m, k),
-        "sonar_true_range_m": (m, k), "kidnap_t_s": (0,),
+        "sonar_true_range_m": (m, k), "kidnap_t_s": (0,), "wall_contact": (n,),
     }
     assert {name: a.shape for name, a in arrays(log).items()} == expected
     assert log.rate_hz == 100.0
     np.testing.assert_allclose(np.diff(log.t_s), 0.01)
     np.testing.assert_allclose(log.sonar_t_s, np.arange(13.0))
     assert log.wheel_ticks.dtype == np.int64 and log.sonar_fault.dtype == bool
+    assert log.wall_contact.dtype == bool and not log.wall_contact.any()  # the route is clear
     assert np.all((log.pose[:, 2] >= -np.pi) & (log.pose[:, 2] < np.pi))
     with pytest.raises(ValueError):
         log.pose[0, 0] = 1.0  # read-only
@@ -84,6 +85,27 @@ def test_inertial_readings_are_truth_plus_bias_plus_declared_white_noise():
     # the centripetal term is really there while turning
     turning = np.abs(log.velocity[:, 0] * log.velocity[:, 1]) > 0.1
     assert turning.any()
+
+
+def test_wall_contacts_come_from_pymunk_and_progress_is_reported():
+    # drive head-on into the east wall of the hall (x = 10): contact from when the disk
+    # reaches it; the geometric clearance agrees with pymunk's flags
+    from robotsim.control import ScriptedProfile
+    from robotsim.maps import point_segment_distance
+
+    fractions = []
+    log = simulate(
+        HALL, ScriptedProfile([0.0], [0.5], [0.0]), start_pose=(8.0, 3.5, 0.0), duration_s=8.0,
+        rng=np.random.default_rng(0), progress=fractions.append,
+    )
+    clearance = point_segment_distance(log.pose[:, None, :2], HALL.segments[:, 0], HALL.segments[:, 1]).min(axis=1)
+    reach = log.robot.radius_m + log.world.wall_radius_m
+    assert log.wall_contact.any() and not log.wall_contact[:100].any()
+    first = int(np.argmax(log.wall_contact))
+    assert clearance[first + 1] < reach + 0.01 and clearance[: first - 5].min() > reach + 0.005
+    assert log.wall_contact[first:-1].mean() > 0.9  # pressed against the wall from then on
+    assert fractions[0] == 0.0 and fractions[-1] == 1.0 and np.all(np.diff(fractions) > 0)
+    assert 50 <= len(fractions) <= 102
 
 
 @pytest.mark.parametrize(

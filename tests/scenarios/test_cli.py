@@ -71,6 +71,19 @@ def test_run_writes_a_recording_and_summary_that_read_back(tmp_path):
         assert rows[entity] == samples, entity
     assert rows["/world/sonar/cones"] == scans
     assert rows["/world/sonar/echoes"] == scans
+    # the localisation pipeline: one row per epoch (a scan), estimates at every 10th sample
+    assert summary["epochs"] == scans and summary["containment"] == 1.0
+    for entity in ("/world/intervals/boxes", "/intervals/box_width_m", "/intervals/q_used"):
+        assert rows[entity] == scans, entity
+    assert rows["/world/intervals/hull"] == scans + 1  # and its static style
+    for branch in ("ukf_only", "fused"):
+        assert rows[f"/world/estimates/{branch}/position"] == -(-samples // 10) + 1, branch  # + static style
+        assert rows[f"/world/estimates/{branch}/ellipse"] == -(-samples // 10) + 1, branch
+        assert f"/world/estimates/{branch}/path" in static
+    for key in ("rmse_position_m", "rmse_heading_rad"):
+        assert set(summary[key]) == {"ukf_only", "fused"}
+    for key in ("ukf_step_us_median", "ia_epoch_ms_median", "ia_epoch_ms_p95", "realtime_factor"):
+        assert summary["timing"][key] > 0, key
     assert len(RrdReader(rrd).blueprints()) == 1
     assert sorted(p.name for p in rrd.parent.iterdir()) == ["hall.json", "hall.rrd"]
 

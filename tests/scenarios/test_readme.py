@@ -16,7 +16,7 @@ from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.runner import run_scenario
-from scenarios.spec import RunSpec, parse_scenario
+from scenarios.spec import EstimationSpec, RunSpec, parse_scenario
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
@@ -61,6 +61,7 @@ DOCUMENTED = {
     "[sensors.gyro]": GyroParams(),
     "[sensors.accelerometer]": AccelerometerParams(),
     "[sensors.sonar]": SonarBeltParams.default_belt(robot_radius_m=RobotParams().radius_m),
+    "[estimation]": EstimationSpec(),
 }
 
 
@@ -79,6 +80,8 @@ def test_every_parameter_is_documented_with_its_true_default(table):
             assert written == str(value).lower(), key
         elif isinstance(value, np.ndarray):
             continue
+        elif isinstance(value, str):
+            assert written == f'"{value}"', key
         else:
             assert float(written) == pytest.approx(value, rel=1e-3), key
         checked += 1

@@ -50,3 +50,18 @@ def test_echo_points_lie_on_the_axis_at_the_reading():
     sensor = np.array([1.0, 2.0]) + 0.2 * np.array([np.cos(heading), np.sin(heading)])
     np.testing.assert_allclose(points[0], sensor + 1.0 * np.array([np.cos(heading), np.sin(heading)]))
     assert np.isfinite(points).all()
+
+
+def test_covariance_ellipses_are_the_sigma_contours():
+    from scenarios.recording import ELLIPSE_POINTS, ELLIPSE_SIGMA, covariance_ellipses
+
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(6, 2, 2))
+    cov = a @ a.mT + 1e-3 * np.eye(2)
+    centres = rng.uniform(0, 5, (6, 2))
+    outline = covariance_ellipses(centres, cov)
+    assert outline.shape == (6, ELLIPSE_POINTS, 2)
+    d = outline - centres[:, None, :]
+    mahalanobis = np.einsum("spi,sij,spj->sp", d, np.linalg.inv(cov), d)
+    np.testing.assert_allclose(mahalanobis, ELLIPSE_SIGMA**2, rtol=1e-9)
+    np.testing.assert_allclose(outline[:, 0], outline[:, -1])  # closed

@@ -14,7 +14,7 @@ from robotsim.robot import RobotParams
 from robotsim.sensors.imu import GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.errors import ScenarioError
-from scenarios.spec import STAND_STILL, builtin_names, load_scenario, parse_scenario
+from scenarios.spec import STAND_STILL, EstimationSpec, builtin_names, load_scenario, parse_scenario
 
 BASE = """
 [map]
@@ -150,7 +150,22 @@ BAD = {
         "sensors.sonar.half_aperture_deg",
         "not both",
     ),
-    "estimation reserved": ("[estimation]\nfilter = 'ukf'\n", "estimation.filter", "reserved for the localisation"),
+    "estimation filter": ("[estimation]\nfilter = 'pf'\n", "estimation.filter", "must be one of 'ukf'"),
+    "estimation tracker": ("[estimation]\ntracker = 'kalman'\n", "estimation.tracker", "'sivia', 'imagesp'"),
+    "estimation fusion": ("[estimation]\nfusion = 'average'\n", "estimation.fusion", "'clamp'"),
+    "estimation eps": ("[estimation]\neps_m = 0\n", "estimation.eps_m", "must be > 0"),
+    "estimation q_max negative": ("[estimation]\nq_max = -1\n", "estimation.q_max", "must be >= 0"),
+    "estimation q_max too large": ("[estimation]\nq_max = 17\n", "estimation.q_max", "at most the number of sonars (16)"),
+    "estimation rate": ("[estimation]\ninterval_rate_hz = 0.3\n", "estimation.interval_rate_hz", "whole number"),
+    "estimation rate above sonar": ("[estimation]\ninterval_rate_hz = 2\n", "estimation.interval_rate_hz", "whole number"),
+    "estimation pitch": ("[estimation]\nimagesp_pitch_m = 0.01\n", "estimation.imagesp_pitch_m", ">= eps_m"),
+    "estimation guaranteed": ("[estimation]\nguaranteed = 'yes'\n", "estimation.guaranteed", "true or false"),
+    "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
+    "free space with lost echoes": (
+        "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
+        "estimation.free_space",
+        "unsound",
+    ),
     "profile too fast": (
         "[[route.profile]]\nduration_s = 1\nv_m_s = 9.0\n", "route.profile[0].v_m_s", "must be <="
     ),
@@ -177,6 +192,22 @@ def _merge(base: str, extra: str) -> str:
     if extra.startswith("[robot]\n"):
         return base + extra[len("[robot]\n") :]
     return base + extra
+
+
+def test_estimation_defaults_and_values():
+    spec = parse(BASE)
+    assert spec.estimation == EstimationSpec(free_space=True)
+    assert spec.estimation.scan_stride(spec.sensors.sonar.rate_hz) == 1
+    lossy = parse(BASE + "[sensors.sonar]\nlost_echo_prob = 0.1\nrate_hz = 2.0\n")
+    assert lossy.estimation.free_space is False and lossy.estimation.interval_rate_hz == 2.0
+    text = (
+        "[sensors.sonar]\nrate_hz = 4.0\n[estimation]\nfilter = 'iekf'\ntracker = 'imagesp'\n"
+        "fusion = 'clamp_heading'\neps_m = 0.1\nq_max = 3\nguaranteed = false\ninterval_rate_hz = 1.0\n"
+        "free_space = false\n"
+    )
+    est = parse(BASE + text).estimation
+    assert (est.filter, est.tracker, est.fusion, est.eps_m, est.q_max) == ("iekf", "imagesp", "clamp_heading", 0.1, 3)
+    assert est.scan_stride(4.0) == 4 and est.free_space is False and est.guaranteed is False
 
 
 def test_empty_map_is_refused():

@@ -1,0 +1,105 @@
+"""The interval epochs of one run: the tracker stepped on the sonar scans, recorded as arrays.
+
+``intervals.tracker`` does the work (global localisation, tracking by SIVIA or IMAGESP,
+GOMNE, inconsistency, relocalisation at the next epoch); this module feeds it the scans of a
+run and keeps what each epoch gave. An epoch's state is an index of :data:`STATUS`
+(``global``, ``tracking``, ``inconsistent``, ``lost``); the fusion clamps only at the first
+two (:data:`CLAMPED`), the only ones with a set. Box arrays of all epochs are concatenated
+(``boxes (B, 3, 2)``) with ``box_counts (E,)`` giving each epoch's share.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from intervals.boxes import area_xy, contains_points
+from intervals.sonar import SonarBelt, SonarScan
+from intervals.tracker import STATUSES, EpochResult, IntervalTracker, TrackerSettings
+
+STATUS = STATUSES
+GLOBAL, TRACKING, INCONSISTENT, LOST = (STATUS.index(name) for name in ("global", "tracking", "inconsistent", "lost"))
+
+#: Epoch states with a set, the ones the fusion clamps to.
+CLAMPED = (GLOBAL, TRACKING)
+
+
+class EpochRunner:
+    """The tracker of one run, stepped scan by scan (holds the previous set between calls).
+
+    ``tracker_settings``; ``segments (m, 2, 2)`` and ``boundary (p, 2) | None`` of the map;
+    ``map_bounds (2, 2)``; ``belt``: the sonar belt seen by the interval tests.
+    """
+
+    def __init__(self, tracker_settings: TrackerSettings, segments, boundary, map_bounds, belt: SonarBelt):
+        self._tracker = IntervalTracker(tracker_settings, map_bounds)
+        self._segments, self._boundary, self._belt = segments, boundary, belt
+        self._previous = None
+
+    def step(self, readings_m: np.ndarray, dt_s: float) -> EpochResult:
+        """One epoch on the scan ``readings_m (k,)`` taken ``dt_s`` after the previous one."""
+        scan = SonarScan(self._segments, self._belt, readings_m, self._boundary)
+        result = self._tracker.step(self._previous, scan, dt_s)
+        self._previous = result.paving
+        return result
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class EpochLog:
+    """Every epoch of a run as arrays (E epochs, B boxes in all).
+
+    ``t_s (E,)`` scan times; ``status (E,)`` int8 (:data:`STATUS`); ``q_used (E,)`` GOMNE's
+    minimal number of outliers (-1: no set); ``box_counts (E,)``; ``boxes (B, 3, 2)``,
+    ``inner (B,)``, ``labels (B,)`` (connected component within its epoch); ``hull (E, 3, 2)``
+    the hull of the outer set (NaN without a set; heading within one turn of the first box);
+    ``components (E,)``; ``area_m2 (E,)`` (x, y) area of the union of the outer boxes (NaN
+    without a set); ``contains_truth (E,)`` bool: some outer box holds the true pose (False
+    without a set); ``elapsed_s (E,)`` wall time per epoch (timing).
+    """
+
+    t_s: np.ndarray
+    status: np.ndarray
+    q_used: np.ndarray
+    box_counts: np.ndarray
+    boxes: np.ndarray
+    inner: np.ndarray
+    labels: np.ndarray
+    hull: np.ndarray
+    components: np.ndarray
+    area_m2: np.ndarray
+    contains_truth: np.ndarray
+    elapsed_s: np.ndarray
+
+    @classmethod
+    def collect(cls, t_s: np.ndarray, results: list[EpochResult], truth: np.ndarray) -> EpochLog:
+        """The log of the tracker's ``results`` (one per scan time ``t_s (E,)``), checked
+        against the true poses ``truth (E, 3)`` at the scans (for the containment figure)."""
+        count = len(results)
+        components = [r.components() for r in results]
+        outer = [r.outer for r in results]
+        contains = np.array([bool(len(b)) and bool(contains_points(b, p[None]).any()) for b, p in zip(outer, truth)])
+        return cls(
+            t_s=np.asarray(t_s, dtype=np.float64),
+            status=np.array([STATUS.index(r.status) for r in results], dtype=np.int8),
+            q_used=np.array([-1 if r.q is None else r.q for r in results], dtype=np.int64),
+            box_counts=np.array([len(b) for b in outer], dtype=np.int64),
+            boxes=np.concatenate(outer) if count else np.zeros((0, 3, 2)),
+            inner=np.concatenate([r.inner_mask for r in results]) if count else np.zeros(0, bool),
+            labels=np.concatenate([labels for _, labels in components]) if count else np.zeros(0, np.int64),
+            hull=np.array([r.hull() for r in results]).reshape(count, 3, 2),
+            components=np.array([n for n, _ in components], dtype=np.int64),
+            area_m2=np.array([area_xy(b) if len(b) else np.nan for b in outer]),
+            contains_truth=contains.astype(bool).reshape(count),
+            elapsed_s=np.array([r.elapsed_s for r in results]),
+        )
+
+    def epoch_boxes(self, e: int) -> np.ndarray:
+        """Outer boxes ``(K, 3, 2)`` of epoch ``e``."""
+        ends = np.cumsum(self.box_counts)
+        return self.boxes[ends[e] - self.box_counts[e] : ends[e]]
+
+    @property
+    def has_set(self) -> np.ndarray:
+        """``(E,)`` bool: the epoch produced a set (``global`` or ``tracking``)."""
+        return np.isin(self.status, CLAMPED)
