@@ -120,11 +120,6 @@ def width(x: np.ndarray) -> np.ndarray:
     return _up(x[..., 1] - x[..., 0])
 
 
-def midpoint(x: np.ndarray) -> np.ndarray:
-    """``(...,)`` midpoints of bounded intervals (``lo + (hi - lo) / 2``, no overflow)."""
-    return x[..., 0] + (x[..., 1] - x[..., 0]) / 2.0
-
-
 def contains(x: np.ndarray, value) -> np.ndarray:
     """``(...,)`` bool: ``value`` lies in the closed interval ``x`` (False when empty)."""
     return (x[..., 0] <= value) & (value <= x[..., 1])

@@ -11,11 +11,13 @@ reading also means ``d <= d_max`` (the simulator returns no echo beyond), so ``h
 only when the caller states that echoes are never lost; otherwise it is ignored.
 
 Tests on a pose box ``[p] = [x] x [y] x [theta]`` for sensor ``i`` with ``[d_i] = [lo, hi]``.
-Write ``S`` for an outward-rounded box enclosing ``{s_i(p) : p in [p]}`` (computed as
-``[x] + |m_i| cos([theta] + beta_i)`` etc. with :mod:`intervals.interval`), ``Phi`` for the
-cone-direction interval ``[theta] + alpha_i + [-gamma, gamma]`` and ``Psi`` for the directions
-in the cone for *every* ``theta`` of the box: ``[theta_hi + alpha_i - gamma,
-theta_lo + alpha_i + gamma]`` (rounded inward; empty when the box is wider than ``2 gamma``).
+Write ``S`` for a box enclosing ``{s_i(p) : p in [p]}``: ``[x] + |m_i| [c]`` etc., where
+``[c]`` bounds ``cos`` over the arc ``[theta] + beta_i`` (its end values, or +-1 where the arc
+passes an axis direction), then widened by ``SENSOR_BOX_MARGIN (1 + |m_i|)`` m (see below);
+``Phi`` for the cone-direction interval ``[theta] + alpha_i + [-gamma, gamma]`` and ``Psi`` for
+the directions in the cone for *every* ``theta`` of the box: ``[theta_hi + alpha_i - gamma,
+theta_lo + alpha_i + gamma]`` (empty, i.e. not used, unless the box is narrower than
+``2 gamma - 1e-9`` rad; ``width(Phi) < pi`` likewise only claimed with a ``1e-9`` rad margin).
 
 * **Hit (data) test** (reject when it fails). If ``d_i(p) in [lo, hi]`` with ``hi`` finite,
   the nearest cone point ``P`` of some segment ``j`` satisfies ``P - s in W(Phi)`` (the wedge of
@@ -47,8 +49,18 @@ theta_lo + alpha_i + gamma]`` (rounded inward; empty when the box is wider than 
   reject it; INSIDE (if inner tests are on) when it is inside the room and at most ``q``
   sensors are not certainly satisfied; else UNDECIDED. GOMNE raises ``q`` from 0.
 
-Floating point. The reading intervals, ``S``, ``Phi`` and ``Psi`` are outward (``Psi``:
-inward) rounded with :mod:`intervals.interval`. The geometric predicates (half-plane clips,
+Floating point. The reading intervals are outward rounded with :mod:`intervals.interval`.
+Directions ``theta + c`` (``c`` = ``beta_i``, ``alpha_i -+ gamma``) are unit vectors computed by
+angle addition from ``cos``/``sin`` of the box's heading bounds and of the constants: each
+component is off by a few ulps (below ``1e-15``). Hence the ends of the arcs in ``S`` are off by
+less than ``1e-15 |m_i|`` m, and after adding ``[x]`` (``|x| <= 1e3``) by less than ``3e-13`` m,
+far below the widening ``1e-9 (1 + |m_i|)`` m, so ``S`` holds every sensor position. Whether an
+arc passes an axis direction ``e`` is decided from ``det(u_a, e)`` and ``det(e, u_b)`` with a
+slack of ``1e-12`` towards "passes" (``_arc_reaches``), a thousand times their float error: a
+passed direction is never missed, only a near-miss counted (a larger, still sound ``S``). A
+wedge edge normal tilted by ``1e-15`` rad moves its half-plane by less than ``1e-15 * 3e3`` m
+over the map, absorbed by ``GUARD_M`` below like every other predicate error.
+The geometric predicates (half-plane clips,
 distances) are evaluated in float64 on coordinates bounded by ``MAX_COORDINATE_M = 1e3`` m
 (checked); each is a handful of operations, so a computed point or distance is off by
 ``delta <= 1e-12`` m (a few ulps of 1e3). The one amplified error is the direction used by
@@ -73,6 +85,7 @@ from intervals.boxes import (
     Subpaving,
     as_boxes,
     hull,
+    max_width,
     pose_scale,
 )
 from intervals.errors import IntervalError
@@ -87,6 +100,15 @@ MAX_COORDINATE_M = 1e3
 NEAR_SWITCH_M = 1e-2
 """Below this centre-to-segment distance the segment-box gap uses the triangle-inequality
 bound, whose rounding error does not grow as the distance shrinks (see ``_segment_box_gap``)."""
+
+MIN_LEVEL_BOXES = 128
+"""SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
+
+SENSOR_BOX_MARGIN = 1e-9
+"""Relative widening of the sensor-position boxes (see :meth:`SonarBelt.sensor_box_margin_m`)."""
+
+_ARC_SLACK = 1e-12
+"""Slack of the arc-extremum decisions in :func:`_arc_reaches`, towards "reached"."""
 
 IGNORED, ECHO, FREE = 0, 1, 2
 """Kinds of sensor constraint: no information, an echo ``[lo, hi]``, free space to ``d_max``."""
@@ -171,12 +193,31 @@ class SonarBelt:
         )
 
     @cached_property
-    def cone_offsets(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(outer (k, 2), inner (k, 2))``: ``alpha_i -+ gamma`` rounded outward, and rounded
-        inward (``[up(alpha - gamma), down(alpha + gamma)]``)."""
-        lo = self.mount_angle_rad - self.half_aperture_rad
-        hi = self.mount_angle_rad + self.half_aperture_rad
-        return np.stack([_down(lo), _up(hi)], axis=-1), np.stack([_up(lo), _down(hi)], axis=-1)
+    def mount_trig(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(cos beta_i, sin beta_i)`` ``(k,)`` of the mount directions (see
+        :meth:`mount_polar`)."""
+        beta = np.arctan2(self.mount_xy[:, 1], self.mount_xy[:, 0])
+        return np.cos(beta), np.sin(beta)
+
+    @cached_property
+    def mount_radius_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(r_lo, r_hi)`` ``(k,)`` of the mount radii (see :meth:`mount_polar`)."""
+        r = self.mount_polar[0]
+        return r[:, 0], r[:, 1]
+
+    @cached_property
+    def cone_trig(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """``((cos, sin) of alpha_i - gamma, (cos, sin) of alpha_i + gamma)``, each ``(k,)``:
+        the right and left cone edges in the robot frame."""
+        right = self.mount_angle_rad - self.half_aperture_rad
+        left = self.mount_angle_rad + self.half_aperture_rad
+        return (np.cos(right), np.sin(right)), (np.cos(left), np.sin(left))
+
+    @property
+    def sensor_box_margin_m(self) -> float:
+        """Widening of the computed sensor-position boxes: ``SENSOR_BOX_MARGIN`` times (1 m +
+        the largest mount radius), far above their float error (see the module doc)."""
+        return SENSOR_BOX_MARGIN * (1.0 + float(np.max(self.mount_polar[0][:, 1])))
 
 
 def _down(x):
@@ -323,14 +364,15 @@ def _clip_segment(ax, ay, ex, ey, constraints, t_lo, t_hi):
     return t_lo, t_hi
 
 
-def _wedge_constraints(angle_lo, angle_hi, cx, cy, hx, hy, sign):
-    """Half-planes bounding wedges of directions ``[angle_lo, angle_hi]`` with apexes in the
-    boxes ``(c, h)``: ``det(u_lo, q) >= k_1`` and ``det(q, u_hi) >= k_2`` where ``k`` is the
-    minimum over the box minus ``GUARD_M`` (``sign = -1``: union of the wedges, a superset) or
-    the maximum plus ``GUARD_M`` (``sign = +1``: intersection of the wedges, a subset)."""
+def _wedge_constraints(u_lo, u_hi, cx, cy, hx, hy, sign):
+    """Half-planes bounding wedges of directions from ``u_lo`` to ``u_hi`` (unit vectors
+    ``(ux, uy)``, counter-clockwise, less than pi apart) with apexes in the boxes ``(c, h)``:
+    ``det(u_lo, q) >= k_1`` and ``det(q, u_hi) >= k_2`` where ``k`` is the minimum over the box
+    minus ``GUARD_M`` (``sign = -1``: union of the wedges, a superset) or the maximum plus
+    ``GUARD_M`` (``sign = +1``: intersection of the wedges, a subset)."""
     out = []
-    for angle, flip in ((angle_lo, 1.0), (angle_hi, -1.0)):
-        nx, ny = -flip * np.sin(angle), flip * np.cos(angle)
+    for (ux, uy), flip in ((u_lo, 1.0), (u_hi, -1.0)):
+        nx, ny = -flip * uy, flip * ux
         spread = np.abs(nx) * hx + np.abs(ny) * hy
         out.append((nx, ny, nx * cx + ny * cy + sign * (spread + GUARD_M)))
     return out
@@ -355,31 +397,66 @@ class _SensorBoxes:
     sure: np.ndarray
 
 
-def _scale_positive(r: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``r * c`` for intervals ``r`` with ``r_lo >= 0`` (the mount radii), rounded outward: the
-    extreme products are ``min(r_lo c_lo, r_hi c_lo)`` and ``max(r_lo c_hi, r_hi c_hi)``."""
-    lo = np.minimum(r[..., 0] * c[..., 0], r[..., 1] * c[..., 0])
-    hi = np.maximum(r[..., 0] * c[..., 1], r[..., 1] * c[..., 1])
-    return np.stack([_down(lo), _up(hi)], axis=-1)
+def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn):
+    """Whether the arc of directions swept counter-clockwise from ``u_a`` to ``u_b`` (unit
+    vectors) holds the direction ``e`` (a unit axis vector ``(ex, ey)``). ``half_turn``: the arc
+    is at least pi wide (then it misses ``e`` only when ``e`` is strictly inside the
+    complementary arc from ``u_b`` to ``u_a``). Decided with a slack of ``_ARC_SLACK`` towards
+    "reached": a wrong "not reached" can only happen within ``1e-12`` rad of an end of the arc,
+    where the extreme value differs from the end's by less than ``1e-24``."""
+    det_a = ux_a * ey - uy_a * ex  # det(u_a, e)
+    det_b = ex * uy_b - ey * ux_b  # det(e, u_b)
+    narrow = (det_a >= -_ARC_SLACK) & (det_b >= -_ARC_SLACK)
+    return np.where(half_turn, ~((det_a < -_ARC_SLACK) & (det_b < -_ARC_SLACK)), narrow)
 
 
 def _sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
-    r_iv, beta_iv = belt.mount_polar
-    cone, sure = belt.cone_offsets
-    theta = boxes[:, None, 2, :]
-    cos_a, sin_a = ia.cos_sin(ia.add(theta, beta_iv))
-    sx = ia.add(boxes[:, None, 0, :], _scale_positive(r_iv, cos_a))  # (N, k, 2)
-    sy = ia.add(boxes[:, None, 1, :], _scale_positive(r_iv, sin_a))
-    cx, cy = (sx[..., 0] + sx[..., 1]) / 2.0, (sy[..., 0] + sy[..., 1]) / 2.0
-    hx, hy = (sx[..., 1] - sx[..., 0]) / 2.0, (sy[..., 1] - sy[..., 0]) / 2.0
-    phi = ia.add(theta, cone)
-    union = _wedge_constraints(phi[..., 0], phi[..., 1], cx, cy, hx, hy, -1.0)
-    narrow = (phi[..., 1] - phi[..., 0]) < np.pi
+    theta_lo, theta_hi = boxes[:, 2, 0], boxes[:, 2, 1]  # (N,)
+    width = theta_hi - theta_lo
+    limit = ia.TRIG_EXACT_LIMIT_RAD
+    trusted = (np.abs(theta_lo) < limit) & (np.abs(theta_hi) < limit)
+    full = ~trusted | (width >= 2.0 * np.pi - 1e-9)
+    # angle addition: direction of theta + c for every box bound and sensor constant c
+    cos_lo, sin_lo = np.cos(theta_lo)[:, None], np.sin(theta_lo)[:, None]  # (N, 1)
+    cos_hi, sin_hi = np.cos(theta_hi)[:, None], np.sin(theta_hi)[:, None]
+    cb, sb = belt.mount_trig
+
+    def turned(c, s):  # ((N, k) x4): unit vectors at theta_lo + c and theta_hi + c
+        return (cos_lo * c - sin_lo * s, sin_lo * c + cos_lo * s,
+                cos_hi * c - sin_hi * s, sin_hi * c + cos_hi * s)
+
+    # sensor positions: x + r cos(theta + beta) over the arc [theta_lo, theta_hi] + beta
+    ax, ay, bx, by = turned(cb, sb)
+    half_turn = (width >= np.pi)[:, None]
+    whole = full[:, None]
+    reach = {axis: whole | _arc_reaches(ax, ay, bx, by, *axis, half_turn)
+             for axis in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))}
+    cos_min = np.where(reach[(-1.0, 0.0)], -1.0, np.minimum(ax, bx))
+    cos_max = np.where(reach[(1.0, 0.0)], 1.0, np.maximum(ax, bx))
+    sin_min = np.where(reach[(0.0, -1.0)], -1.0, np.minimum(ay, by))
+    sin_max = np.where(reach[(0.0, 1.0)], 1.0, np.maximum(ay, by))
+    r_lo, r_hi = belt.mount_radius_bounds
+    margin = belt.sensor_box_margin_m
+    x_lo = boxes[:, None, 0, 0] + np.minimum(r_lo * cos_min, r_hi * cos_min) - margin
+    x_hi = boxes[:, None, 0, 1] + np.maximum(r_lo * cos_max, r_hi * cos_max) + margin
+    y_lo = boxes[:, None, 1, 0] + np.minimum(r_lo * sin_min, r_hi * sin_min) - margin
+    y_hi = boxes[:, None, 1, 1] + np.maximum(r_lo * sin_max, r_hi * sin_max) + margin
+    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
+    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
+    # wedge edges: union over the box at theta_lo + alpha - gamma and theta_hi + alpha + gamma,
+    # intersection at theta_hi + alpha - gamma and theta_lo + alpha + gamma
+    (c_right, s_right), (c_left, s_left) = belt.cone_trig
+    right_lo_x, right_lo_y, right_hi_x, right_hi_y = turned(c_right, s_right)
+    left_lo_x, left_lo_y, left_hi_x, left_hi_y = turned(c_left, s_left)
+    narrow = (trusted & (width + 2.0 * belt.half_aperture_rad < np.pi - 1e-9))[:, None]
+    union = _wedge_constraints((right_lo_x, right_lo_y), (left_hi_x, left_hi_y),
+                               cx, cy, hx, hy, -1.0)
     union = tuple((nx, ny, np.where(narrow, c, -np.inf)) for nx, ny, c in union)
-    psi_lo = _up(theta[..., 1] + sure[:, 0])
-    psi_hi = _down(theta[..., 0] + sure[:, 1])
-    inter = tuple(_wedge_constraints(psi_lo, psi_hi, cx, cy, hx, hy, 1.0))
-    return _SensorBoxes(cx, cy, hx, hy, union, inter, psi_lo < psi_hi)
+    inter = _wedge_constraints((right_hi_x, right_hi_y), (left_lo_x, left_lo_y),
+                               cx, cy, hx, hy, 1.0)
+    sure = trusted & (width < 2.0 * belt.half_aperture_rad - 1e-9)
+    sure = np.broadcast_to(sure[:, None], cx.shape)
+    return _SensorBoxes(cx, cy, hx, hy, union, tuple(inter), sure)
 
 
 def _room_verdict(boxes: np.ndarray, boundary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -434,8 +511,7 @@ def sensor_verdicts(
 
     # stage 1, every (pair, sensor): the part [t0, t1] of the segment in S + W(Phi)
     union = tuple(tuple(v[box_idx] for v in h) for h in sb.union)
-    zeros = np.zeros((box_idx.size, k))
-    t0, t1 = _clip_segment(ax, ay, ex, ey, union, zeros, zeros + 1.0)
+    t0, t1 = _clip_segment(ax, ay, ex, ey, union, 0.0, 1.0)
     # stage 2, only the (pair, sensor) triples whose segment part is not empty and whose
     # sensor is used: nothing else can satisfy the hit test or fire the free-space test
     pair, sensor = np.nonzero((t0 <= t1) & (scan.kind != IGNORED))  # (T,)
@@ -456,16 +532,23 @@ def sensor_verdicts(
     ) + GUARD_M
     hit_ok = (dist_lb <= hi_t) & (dist_ub >= lo_t)
 
-    # free-space test: segment points inside the cone for every pose of the box
-    # (the intersection of the wedges lies in their union, so these triples suffice)
-    inter = tuple(tuple(v[box, sensor] for v in h) for h in sb.inter)
-    ones = np.ones(t0.shape)
-    u0, u1 = _clip_segment(ax, ay, ex, ey, inter, 0.0 * ones, ones)
-    sure = sb.sure[box, sensor] & (u0 <= u1)
-    u0, u1 = np.where(sure, u0, 0.0), np.where(sure, u1, 0.0)
-    far_bound = _nearest_on_segment(
-        cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-    )[2] + np.hypot(hx, hy) + GUARD_M  # >= |P - s| for every s of the sensor box
+    # free-space test: segment points inside the cone for every pose of the box (the
+    # intersection of the wedges lies in their union, so these triples suffice); only where
+    # Psi is not empty, elsewhere it cannot fire
+    sure = sb.sure[box, sensor]
+    far_bound = np.zeros(t0.shape)
+    fs = np.flatnonzero(sure)
+    if fs.size:
+        b_fs, s_fs = box[fs], sensor[fs]
+        inter = tuple(tuple(v[b_fs, s_fs] for v in h) for h in sb.inter)
+        fax, fay, fex, fey = ax[fs], ay[fs], ex[fs], ey[fs]
+        u0, u1 = _clip_segment(fax, fay, fex, fey, inter, 0.0, 1.0)
+        part = u0 <= u1
+        sure[fs] = part
+        u0, u1 = np.where(part, u0, 0.0), np.where(part, u1, 0.0)
+        far_bound[fs] = _nearest_on_segment(
+            cx[fs], cy[fs], fax + u0 * fex, fay + u0 * fey, (u1 - u0) * fex, (u1 - u0) * fey
+        )[2] + np.hypot(hx[fs], hy[fs]) + GUARD_M  # >= |P - s| for every s of the sensor box
     free_fires = sure & (far_bound < lo_t)
 
     idx = box * k + sensor
@@ -485,19 +568,62 @@ def sensor_verdicts(
     return reject, certain
 
 
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool):
+    """``(verdicts (N,) int8, rejects (N,))``: :func:`box_test` and the number of sensors
+    rejecting each box."""
+    reject, certain = sensor_verdicts(boxes, scan, inner)
+    rejects = np.count_nonzero(reject, axis=1)
+    out = rejects > q
+    inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
+    if scan.boundary is not None:
+        # the in-room test only matters for the boxes the sensors do not reject
+        live = np.flatnonzero(~out)
+        room_out, room_in = _room_verdict(boxes[live], scan.boundary)
+        out[live] |= room_out
+        inside[live] &= room_in
+    verdicts = np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
+    return verdicts, rejects
+
+
 def box_test(boxes, scan: SonarScan, q: int = 0, inner: bool = True) -> np.ndarray:
     """SIVIA test ``(N,) int8``: OUTSIDE when the in-room test or more than ``q`` sensors reject
     the box, INSIDE when (``inner``) it is inside the room and at most ``q`` sensors are not
     certainly satisfied, else UNDECIDED."""
-    boxes = as_boxes(boxes)
-    reject, certain = sensor_verdicts(boxes, scan, inner)
-    out = np.count_nonzero(reject, axis=1) > q
-    inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
-    if scan.boundary is not None:
-        room_out, room_in = _room_verdict(boxes, scan.boundary)
-        out |= room_out
-        inside &= room_in
-    return np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
+    return _test_and_counts(as_boxes(boxes), scan, q, inner)[0]
+
+
+def _checked_q(q) -> None:
+    if not (isinstance(q, (int, np.integer)) and q >= 0):
+        raise IntervalError(f"q must be a non-negative integer, got {q!r}")
+
+
+def _initial_poses(initial) -> np.ndarray:
+    boxes = as_boxes(initial, "initial pose boxes")
+    if boxes.shape[1] != 3:
+        raise IntervalError(f"initial pose boxes must be (N, 3, 2), got {boxes.shape}")
+    return boxes
+
+
+def _pave(local: SonarScan, boxes, eps, q, scale, inner, splits_per_level):
+    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,))`` with the number of
+    sensors rejecting each boundary box, kept from the SIVIA level that stored the box (the
+    boundary boxes are the undecided boxes no wider than ``eps``, in the order SIVIA met
+    them; checked, and recomputed if SIVIA ever stored them otherwise)."""
+    stored, counts = [], []
+
+    def test(b):
+        verdicts, rejects = _test_and_counts(b, local, q, inner)
+        keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
+        stored.append(b[keep])
+        counts.append(rejects[keep])
+        return verdicts
+
+    paving = sivia(test, boxes, eps, scale, splits_per_level=splits_per_level,
+                   min_level_boxes=MIN_LEVEL_BOXES)
+    rejects = np.concatenate(counts)
+    if not np.array_equal(np.concatenate(stored), paving.boundary):
+        rejects = np.count_nonzero(sensor_verdicts(paving.boundary, local, False)[0], axis=1)
+    return paving, rejects
 
 
 def localize(
@@ -512,22 +638,15 @@ def localize(
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
     ``initial``: a pose box ``(3, 2)`` or a subpaving ``(N, 3, 2)``. Only the segments within
-    reach of the initial boxes take part. ``inner=False`` (default) skips the inner acceptance
+    reach of the initial boxes take part. Levels of fewer than :data:`MIN_LEVEL_BOXES` boxes
+    are bisected further before the test (see :func:`intervals.sivia.sivia`).
+    ``inner=False`` (default) skips the inner acceptance
     test: the outer approximation is what the fusion uses, and it is cheaper.
     """
-    if not (isinstance(q, (int, np.integer)) and q >= 0):
-        raise IntervalError(f"q must be a non-negative integer, got {q!r}")
-    boxes = as_boxes(initial, "initial pose boxes")
-    if boxes.shape[1] != 3:
-        raise IntervalError(f"initial pose boxes must be (N, 3, 2), got {boxes.shape}")
-    local = scan.restricted_to(boxes)
-    return sivia(
-        lambda b: box_test(b, local, q, inner),
-        boxes,
-        eps,
-        pose_scale(heading_scale_m_per_rad),
-        splits_per_level=splits_per_level,
-    )
+    _checked_q(q)
+    boxes = _initial_poses(initial)
+    scale = pose_scale(heading_scale_m_per_rad)
+    return _pave(scan.restricted_to(boxes), boxes, eps, q, scale, inner, splits_per_level)[0]
 
 
 @dataclass(frozen=True)
@@ -561,8 +680,9 @@ def gomne(
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
     The sets are nested (``S_0 ⊆ S_1 ⊆ ... ⊆ S_qmax``), so ``S_qmax`` is paved first (empty:
-    inconsistent, stop), then ``q = 0, 1, ...`` are tried on its boxes only (each a single
-    cheap SIVIA pass over boxes already at ``eps``).
+    inconsistent, stop); without inner boxes ``S_q`` is read off the number of sensors rejecting
+    each of its boxes, recorded during that pass; with them ``q = 0, 1, ...`` are tried on its
+    boxes (a SIVIA pass each).
 
     ``guaranteed=True`` returns ``S_qmax``: it holds the true pose whenever at most ``q_max``
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
@@ -571,11 +691,22 @@ def gomne(
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
-    widest = localize(scan, initial, eps, q_max, heading_scale_m_per_rad, inner)
+    boxes = _initial_poses(initial)
+    scale = pose_scale(heading_scale_m_per_rad)
+    widest, rejects = _pave(scan.restricted_to(boxes), boxes, eps, q_max, scale, inner, 3)
     if widest.is_empty:
         return GomneResult(widest, None, None)
-    for q in range(q_max):
-        paving = localize(scan, widest.outer, eps, q, heading_scale_m_per_rad, inner)
-        if not paving.is_empty:
-            return GomneResult(widest if guaranteed else paving, q, q_max if guaranteed else q)
-    return GomneResult(widest, q_max, q_max)
+    if inner:
+        for q in range(q_max):
+            minimal = localize(scan, widest.outer, eps, q, heading_scale_m_per_rad, inner)
+            if not minimal.is_empty:
+                break
+        else:
+            q, minimal = q_max, widest
+    else:
+        # Every box of S_qmax is then a boundary box no wider than eps that passed the
+        # in-room test: SIVIA at q < q_max on them would keep exactly those rejected by at most
+        # q sensors, so the reject counts of the q_max pass give every S_q without a new pass.
+        q = int(min(rejects.min(), q_max))
+        minimal = Subpaving(widest.inner, widest.boundary[rejects <= q])
+    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q)

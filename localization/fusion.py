@@ -63,6 +63,8 @@ class FusionReport:
         moved: ``(r,)`` True where the position was outside the position box (clamped).
         heading_moved: ``(r,)`` True where the heading was outside its interval (heading rules).
         skipped: True when there was no box and ``on_empty="skip"`` left the belief alone.
+        hull: ``(r, 3, 2)`` the hull of the component used, the box the rows were fused with
+            (NaN when skipped).
     """
 
     rows: np.ndarray
@@ -71,6 +73,7 @@ class FusionReport:
     moved: np.ndarray
     heading_moved: np.ndarray
     skipped: bool = False
+    hull: np.ndarray | None = None
 
 
 def check_boxes(boxes, labels=None) -> tuple[np.ndarray, np.ndarray]:
@@ -229,7 +232,9 @@ def fuse(belief: Gaussian, boxes, labels=None, rows=(1,), rule: str = "clamp",
                 "(on_empty='skip' leaves the belief unchanged)"
             )
         unmoved = np.zeros(count, dtype=bool)
-        return belief, FusionReport(rows, np.full(count, -1), np.full(count, np.nan), unmoved, unmoved, True)
+        return belief, FusionReport(
+            rows, np.full(count, -1), np.full(count, np.nan), unmoved, unmoved, True, np.full((count, 3, 2), np.nan)
+        )
 
     mean = np.array(belief.mean)
     cov = np.array(belief.cov)
@@ -265,5 +270,5 @@ def fuse(belief: Gaussian, boxes, labels=None, rows=(1,), rule: str = "clamp",
         # in the box whatever the rounding and the heading step (it moves x, y through the correlation)
         fused_mean[:, :2] = np.clip(fused_mean[:, :2], hull[:, :2, 0], hull[:, :2, 1])
     mean[rows], cov[rows] = fused_mean, fused_cov
-    report = FusionReport(rows, label, distance, ~inside, heading_moved)
+    report = FusionReport(rows, label, distance, ~inside, heading_moved, hull=hull)
     return Gaussian(mean, cov, belief.angle_indices), report

@@ -32,8 +32,17 @@ class ConvergenceWarning(EstimationWarning):
 
 
 def wrap_angle(angle_rad: np.ndarray) -> np.ndarray:
-    """Angles wrapped to ``[-pi, pi)`` (any shape)."""
-    return (angle_rad + math.pi) % TWO_PI - math.pi
+    """Angles wrapped to ``[-pi, pi)`` (any shape; a float gives a numpy float).
+
+    ``(a + pi) % 2 pi`` can round up to exactly ``2 pi`` for ``a`` just below ``-pi``; that
+    result (``+pi``) is moved to ``-pi`` so the half-open range holds at the edge too.
+    """
+    wrapped = np.add(angle_rad, math.pi)  # a new array (or numpy float): the steps below work in place
+    wrapped %= TWO_PI
+    wrapped -= math.pi
+    if wrapped.size and wrapped.max() >= math.pi:  # rare: one comparison pass in the common case
+        wrapped = np.where(wrapped >= math.pi, wrapped - TWO_PI, wrapped)[()]
+    return wrapped
 
 
 def wrap_residual(angle_rad: np.ndarray) -> np.ndarray:
@@ -50,7 +59,8 @@ def wrap_columns(values: np.ndarray, angle_indices: tuple[int, ...]) -> np.ndarr
     """
     if values.ndim == 1:
         for i in angle_indices:
-            values[i] = (float(values[i]) + math.pi) % TWO_PI - math.pi
+            wrapped = (float(values[i]) + math.pi) % TWO_PI - math.pi
+            values[i] = wrapped - TWO_PI if wrapped >= math.pi else wrapped
         return values
     for i in angle_indices:
         values[..., i] = wrap_angle(values[..., i])

@@ -129,6 +129,23 @@ def _outer_polygon(geometry: BaseGeometry) -> np.ndarray | None:
     return np.asarray(largest.exterior.coords, dtype=np.float64)[:-1, :2]
 
 
+def outer_wall(segments: np.ndarray) -> np.ndarray | None:
+    """The outer wall ``(p, 2)`` closed by segments ``(m, 2, 2)``: the largest polygon they
+    close, if it encloses every segment; otherwise None (the map has no outer wall).
+
+    For maps given as loose segments or line strings (inline segments, WKT line strings,
+    GeoJSON LineStrings): the same room gets the same boundary whatever its format.
+    """
+    lines = shapely.union_all(shapely.linestrings(segments))
+    polygons = shapely.get_parts(shapely.polygonize(shapely.get_parts(lines)))
+    if len(polygons) == 0:
+        return None
+    largest = max(polygons, key=lambda polygon: polygon.area)
+    if not shapely.contains_xy(largest.buffer(1e-9), segments[..., 0], segments[..., 1]).all():
+        return None
+    return np.asarray(largest.exterior.coords, dtype=np.float64)[:-1, :2]
+
+
 @dataclass(frozen=True, eq=False)
 class SegmentMap:
     """A validated segment map.
@@ -162,9 +179,12 @@ class SegmentMap:
         pieces = _geometry_segments(geometry)
         if not pieces:
             raise MapError(f"map {name!r}: the geometry holds no line segments")
+        segments = np.concatenate(pieces, axis=0)
         if boundary is None:
             boundary = _outer_polygon(geometry)
-        return cls(segments=np.concatenate(pieces, axis=0), name=name, boundary=boundary)
+        if boundary is None:  # line strings only: the polygon they close, as for inline segments
+            boundary = outer_wall(_as_segments(segments, name))
+        return cls(segments=segments, name=name, boundary=boundary)
 
     @classmethod
     def from_wkt(cls, text: str, name: str = "map", boundary: Any = None) -> SegmentMap:
@@ -172,6 +192,7 @@ class SegmentMap:
 
         Every consecutive pair of vertices becomes a segment; a polygon's rings become walls
         and the exterior of the largest polygon becomes ``boundary`` unless one is given.
+        Without a polygon, the boundary is the :func:`outer_wall` the line strings close.
         """
         return cls._from_geometry(_parse(shapely.from_wkt, text, "WKT", name), name, boundary)
 

@@ -20,8 +20,17 @@ from robotsim.errors import RobotsimError
 
 
 def wrap_angle(angle_rad):
-    """Angles wrapped to ``[-pi, pi)`` (array or float)."""
-    return (np.asarray(angle_rad) + np.pi) % (2.0 * np.pi) - np.pi
+    """Angles wrapped to ``[-pi, pi)`` (array or float; a float gives a numpy float).
+
+    ``(a + pi) % 2 pi`` can round up to exactly ``2 pi`` for ``a`` just below ``-pi``; that
+    result (``+pi``) is moved to ``-pi`` so the half-open range holds at the edge too.
+    """
+    wrapped = np.add(angle_rad, np.pi)  # a new array (or numpy float): the steps below work in place
+    wrapped %= 2.0 * np.pi
+    wrapped -= np.pi
+    if wrapped.size and wrapped.max() >= np.pi:  # rare: one comparison pass in the common case
+        wrapped = np.where(wrapped >= np.pi, wrapped - 2.0 * np.pi, wrapped)[()]
+    return wrapped
 
 
 @dataclass(frozen=True)

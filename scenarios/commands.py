@@ -2,7 +2,9 @@
 
 ``robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]`` runs one
 scenario headless and writes its rerun recording and its JSON summary, both atomically: a
-user error or a crash leaves neither file behind (nor a half of one).
+user error or a crash leaves neither file behind (nor a half of one). Both destinations are
+checked before anything runs. The run checks its own guarantee: exit status 1 when the
+truth left an interval set although the sonar has no faults configured.
 """
 
 from __future__ import annotations
@@ -11,10 +13,11 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from scenarios import outputs
-from scenarios.spec import DEFAULT_MAP, builtin_names, load_scenario
+from scenarios.errors import ScenarioError
+from scenarios.spec import DEFAULT_MAP, ScenarioSpec, builtin_names, load_scenario
 
 #: Where ``robotsim run`` writes when no path is given.
 DEFAULT_RUNS_DIR = Path("runs")
@@ -53,11 +56,13 @@ def run(args: argparse.Namespace) -> int:
     rrd_path = args.rrd or DEFAULT_RUNS_DIR / f"{stem}.rrd"
     summary_path = args.summary or DEFAULT_RUNS_DIR / f"{stem}.json"
 
+    _check_destinations(rrd_path, summary_path)
+
     bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
     start = time.perf_counter()
     try:
         result = run_scenario(spec, progress=(lambda done: bar.update(RUN_SHARE * done)) if bar else None)
-        with outputs.atomic_path(rrd_path) as rrd_tmp, outputs.atomic_path(summary_path) as summary_tmp:
+        with outputs.atomic_paths(rrd_path, summary_path) as (rrd_tmp, summary_tmp):
             recording_start = time.perf_counter()
             write_recording(rrd_tmp, spec, result.log, result.estimation)
             recording_s = time.perf_counter() - recording_start
@@ -75,7 +80,38 @@ def run(args: argparse.Namespace) -> int:
         f"({timing['realtime_factor']:.0f}x real time); containment {summary['containment']}, position RMSE "
         f"UKF-only {rmse['ukf_only']:.3f} m, fused {rmse['fused']:.3f} m; wrote {rrd_path} and {summary_path}"
     )
+    failure = guarantee_failure(spec, summary)
+    if failure:
+        print(f"robotsim: {failure}", file=sys.stderr)
+        return 1
     return 0
+
+
+def guarantee_failure(spec: ScenarioSpec, summary: dict[str, Any]) -> str | None:
+    """Why the run broke its guarantee, or None.
+
+    With a sonar without faults (``outlier_prob = lost_echo_prob = 0``) every interval set
+    must hold the truth; a containment below 1 there is a defect, not bad luck. With faults
+    configured, more than ``q_max`` outliers in a scan may legitimately lose the truth.
+    """
+    sonar = spec.sensors.sonar
+    containment = summary["containment"]
+    if sonar.outlier_prob > 0.0 or sonar.lost_echo_prob > 0.0 or containment is None or containment >= 1.0:
+        return None
+    return (
+        f"the guarantee failed: the truth left the interval set (containment {containment:.4g}) "
+        f"although {spec.source}'s sonar has no faults configured"
+    )
+
+
+def _check_destinations(rrd_path: Path, summary_path: Path) -> None:
+    """Refuse, before any simulation, outputs that could not both be written."""
+    for option, path in (("--rrd", rrd_path), ("--summary", summary_path)):
+        reason = outputs.check_destination(path)
+        if reason is not None:
+            raise ScenarioError(None, option, reason)
+    if rrd_path.resolve() == summary_path.resolve():
+        raise ScenarioError(None, "--summary", "same file as --rrd")
 
 
 def list_scenarios(args: argparse.Namespace) -> int:

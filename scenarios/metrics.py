@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from robotsim.maps import point_segment_distance
+from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
 
 from scenarios.epochs import STATUS
@@ -123,7 +124,7 @@ def rmse_position_m(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def rmse_heading_rad(estimate: np.ndarray, truth: np.ndarray) -> float:
     """Root mean square of the heading error, wrapped to ``[-pi, pi)``, radians."""
-    error = np.mod(estimate[:, 2] - truth[:, 2] + np.pi, 2.0 * np.pi) - np.pi
+    error = wrap_angle(estimate[:, 2] - truth[:, 2])
     return float(np.sqrt(np.mean(error**2)))
 
 

@@ -46,6 +46,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from robotsim.robot import wrap_angle
+
 from scenarios.runner import BRANCHES
 
 if TYPE_CHECKING:
@@ -261,7 +263,7 @@ def record_estimation(rec: rr.RecordingStream, log: SimulationLog, estimation: E
         rec.send_columns(f"{base}/ellipse", indexes=times, columns=rr.LineStrips2D.columns(strips=outlines))
         rec.log(f"{base}/ellipse", rr.LineStrips2D.from_fields(colors=color, radii=0.01), static=True)
         error_xy = np.linalg.norm(shown[:, :2] - truth[:, :2], axis=1)
-        error_theta = np.abs(np.mod(shown[:, 2] - truth[:, 2] + np.pi, 2.0 * np.pi) - np.pi)
+        error_theta = np.abs(wrap_angle(shown[:, 2] - truth[:, 2]))
         rec.send_columns(f"errors/position_m/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_xy))
         rec.send_columns(f"errors/heading_rad/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_theta))
 

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from intervals.errors import IntervalError
 from intervals.sonar import SonarBelt
 from intervals.tracker import TrackerSettings
 from localization.dead_reckoning import (
@@ -40,6 +41,7 @@ from localization.fusion import fuse
 from robotsim.simulation import KidnapEvent, SensorSuite, SimulationLog, simulate
 from robotsim.world import WorldParams
 from scenarios.epochs import EpochLog, EpochRunner
+from scenarios.errors import ScenarioError
 from scenarios.metrics import interval_stats, rmse_heading_rad, rmse_position_m, summarize
 from scenarios.spec import ScenarioSpec
 
@@ -142,7 +144,10 @@ def run_scenario(
     start = time.perf_counter()
     log = simulate_spec(spec, kidnaps=kidnaps, progress=(lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None)
     simulate_s = time.perf_counter() - start
-    estimation, times = estimate(spec, log, progress=progress)
+    try:
+        estimation, times = estimate(spec, log, progress=progress)
+    except IntervalError as exc:  # an impossible [estimation] setting met at run time (a box explosion)
+        raise ScenarioError(spec.source, "estimation", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
@@ -246,9 +251,7 @@ def estimate(
             outer, labels = found.outer, found.components()[1]
             belief, report = fuse(belief, outer, labels, rows=(FUSED,), rule=est.fusion)
             dr.replace(belief)
-            component = int(report.component[0])
-            mine = outer[labels == component]
-            box = np.stack([mine[..., 0].min(axis=0), mine[..., 1].max(axis=0)], axis=-1)
+            component, box = int(report.component[0]), report.hull[0]
         after.append(np.array(belief.mean[FUSED, :3]))
         boxes.append(box)
         chosen.append(component)

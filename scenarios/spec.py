@@ -8,7 +8,8 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     One line shown by ``robotsim scenarios``.
 ``[run]``
     ``duration_s`` (60.0), ``seed`` (0), and the sample rate of the simulation and of the
-    proprioceptive sensors: ``rate_hz`` (100.0) or ``dt_s`` (0.01), not both.
+    proprioceptive sensors: ``rate_hz`` (100.0) or ``dt_s`` (0.01), not both. A run has
+    from 1 to :data:`MAX_SAMPLES` samples (``duration_s * rate_hz``).
 ``[map]``
     Exactly one of ``builtin`` (a name of ``robotsim.maps.BUILTIN_MAP_NAMES``),
     ``segments`` (an array of ``[[ax, ay], [bx, by]]`` in metres) or ``file`` (a ``.wkt``,
@@ -26,7 +27,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     The fields of the simulator's sensor parameter classes; for the sonar also ``count``
     (an even belt on the robot's rim, the default) in place of ``mount_xy`` and
     ``mount_angle_rad``. A field named ``*_rad*`` may be written in degrees under the same
-    name with ``_deg`` in place of ``_rad`` (``half_aperture_deg``); never both.
+    name with ``_deg`` in place of ``_rad`` (``half_aperture_deg``); never both. The sonar's
+    ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
+    sample; a faster or off-beat sonar is refused rather than silently slowed).
 ``[estimation]``
     The localisation pipeline (paper 002): ``filter`` (``"ukf"``; or ``"iukf"``, ``"ekf"``,
     ``"iekf"``), ``tracker`` (``"sivia"`` or ``"imagesp"``), ``fusion`` (``"clamp"``, the
@@ -56,7 +59,7 @@ from intervals.tracker import TRACKERS
 from localization.fusion import FUSION_RULES
 from robotsim.control import Plan, Route, ScriptedProfile
 from robotsim.errors import RobotsimError
-from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map
+from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
 from robotsim.robot import RobotParams, wrap_angle
 from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
@@ -72,6 +75,17 @@ DEFAULT_DURATION_S = 60.0
 DEFAULT_SEED = 0
 DEFAULT_RATE_HZ = 100.0
 DEFAULT_MAP = "hall"
+
+#: The most samples (``duration_s * rate_hz``) a run may have: ten million samples take
+#: about 10 GB of logs and hours of simulation; beyond, refused before anything runs.
+MAX_SAMPLES = 10_000_000
+
+#: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
+#: (a millimetre is far below the sonar's error bounds).
+MIN_EPS_M = 1e-3
+
+#: Tolerance on the whole number of samples between two sonar scans.
+RATE_RATIO_TOL = 1e-9
 
 #: The plan of a scenario without a route: no motion.
 STAND_STILL = ScriptedProfile(t_s=np.zeros(1), v_m_s=np.zeros(1), omega_rad_s=np.zeros(1))
@@ -123,9 +137,9 @@ class EstimationSpec:
     fusion: str = "clamp"
     """The fusion rule of ``localization.fusion``; ``"clamp"`` is the paper's (section 4)."""
     eps_m: float = 0.05
-    """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m (> 0)."""
+    """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m (>= MIN_EPS_M)."""
     q_max: int = 1
-    """Largest number of outlying sonar readings GOMNE may assume per epoch (0 to the belt size)."""
+    """Largest number of outlying sonar readings GOMNE may assume per epoch (0 to the belt size less one)."""
     guaranteed: bool = True
     """Keep the ``q_max``-relaxed set, which holds the truth whenever a scan has at most
     ``q_max`` outliers (true), or GOMNE's set at the smallest ``q`` explaining the scan
@@ -175,6 +189,9 @@ class ScenarioSpec:
         if duration_s is not None:
             if not (math.isfinite(duration_s) and duration_s > 0):
                 raise ScenarioError(None, "--duration", f"must be a finite number > 0, got {duration_s}")
+            reason = _sample_count_problem(duration_s, run.rate_hz)
+            if reason is not None:
+                raise ScenarioError(None, "--duration", reason)
             run = dataclasses.replace(run, duration_s=duration_s)
         return dataclasses.replace(self, run=run)
 
@@ -232,7 +249,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     start_pose = (float(start_xy[0]), float(start_xy[1]), float(wrap_angle(math.radians(heading_deg))))
     _check_start(robot_table, segment_map, start_pose, robot)
     plan = _read_route(top.take_table("route"), segment_map, robot)
-    sensors = _read_sensors(top.take_table("sensors"), robot)
+    sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), sensors.sonar)
     top.finish()
     return ScenarioSpec(
@@ -257,6 +274,7 @@ def _read_run(table: Table) -> RunSpec:
     seed = table.take_int("seed", DEFAULT_SEED, minimum=0)
     if table.has("rate_hz") and table.has("dt_s"):
         raise table.error("dt_s", "give rate_hz or dt_s, not both")
+    rate_key = "dt_s" if table.has("dt_s") else "rate_hz"
     if table.has("dt_s"):
         rate_hz = 1.0 / table.take_float("dt_s", above=0.0)
         table.take_float("rate_hz", None)
@@ -264,9 +282,25 @@ def _read_run(table: Table) -> RunSpec:
         rate_hz = table.take_float("rate_hz", DEFAULT_RATE_HZ, above=0.0)
         table.take_float("dt_s", None)
     table.finish()
-    if duration_s * rate_hz < 1.0:
-        raise table.error("duration_s", f"shorter than one sample at {rate_hz:g} Hz")
+    reason = _sample_count_problem(duration_s, rate_hz)
+    if reason is not None:
+        # blame the rate when the duration alone would be fine at the default rate
+        too_fast = duration_s * rate_hz > MAX_SAMPLES and duration_s * DEFAULT_RATE_HZ <= MAX_SAMPLES
+        raise table.error(rate_key if too_fast else "duration_s", reason)
     return RunSpec(duration_s=duration_s, seed=seed, rate_hz=rate_hz)
+
+
+def _sample_count_problem(duration_s: float, rate_hz: float) -> str | None:
+    """Why a run of ``duration_s`` at ``rate_hz`` cannot be simulated, or None."""
+    samples = duration_s * rate_hz
+    if samples < 1.0:
+        return f"shorter than one sample at {rate_hz:g} Hz (duration {duration_s:g} s)"
+    if samples > MAX_SAMPLES:
+        return (
+            f"{duration_s:g} s at {rate_hz:g} Hz is {samples:.3g} samples, more than the "
+            f"{MAX_SAMPLES:.0e} a run may have"
+        )
+    return None
 
 
 def _read_map(table: Table, base_dir: Path) -> SegmentMap:
@@ -284,7 +318,7 @@ def _read_map(table: Table, base_dir: Path) -> SegmentMap:
         raw = table.take_array("segments", (None, 2, 2))
         table.finish()
         return _map_or_error(
-            table, "segments", lambda: SegmentMap.from_segments(raw, name="inline", boundary=_outer_wall(raw))
+            table, "segments", lambda: SegmentMap.from_segments(raw, name="inline", boundary=outer_wall(raw))
         )
     relative = table.take_str("file")
     table.finish()
@@ -301,19 +335,6 @@ def _read_map(table: Table, base_dir: Path) -> SegmentMap:
     if suffix in (".geojson", ".json"):
         return _map_or_error(table, "file", lambda: SegmentMap.from_geojson(text, name=path.stem))
     raise table.error("file", f"unknown map format {suffix!r} (use .wkt, .geojson or .json)")
-
-
-def _outer_wall(segments: np.ndarray) -> np.ndarray | None:
-    """The outer wall ``(p, 2)`` of inline segments ``(m, 2, 2)``: the largest polygon they
-    close, if it encloses every segment; otherwise None (the map has no outer wall)."""
-    lines = shapely.union_all(shapely.linestrings(segments))
-    polygons = shapely.get_parts(shapely.polygonize(shapely.get_parts(lines)))
-    if len(polygons) == 0:
-        return None
-    largest = max(polygons, key=lambda polygon: polygon.area)
-    if not shapely.contains_xy(largest.buffer(1e-9), segments[..., 0], segments[..., 1]).all():
-        return None
-    return np.asarray(largest.exterior.coords)[:-1]
 
 
 def _map_or_error(table: Table, key: str, make: Callable[[], SegmentMap]) -> SegmentMap:
@@ -371,19 +392,23 @@ def _profile(steps: list[Table], robot: RobotParams) -> ScriptedProfile:
     return ScriptedProfile(t_s=starts, v_m_s=np.append(speeds, 0.0), omega_rad_s=np.append(rates, 0.0))
 
 
-def _read_sensors(table: Table, robot: RobotParams) -> SensorsSpec:
+def _read_sensors(table: Table, robot: RobotParams, run: RunSpec) -> SensorsSpec:
     sensors = SensorsSpec(
         encoders=_read_params(table.take_table("encoders"), EncoderParams()),
         gyro=_read_params(table.take_table("gyro"), GyroParams()),
         accelerometer=_read_params(table.take_table("accelerometer"), AccelerometerParams()),
-        sonar=_read_sonar(table.take_table("sonar"), robot),
+        sonar=_read_sonar(table.take_table("sonar"), robot, run),
     )
     table.finish()
     return sensors
 
 
-def _read_sonar(table: Table, robot: RobotParams) -> SonarBeltParams:
-    """The default belt (``count`` sensors evenly round the robot's rim) or explicit mounts."""
+def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltParams:
+    """The default belt (``count`` sensors evenly round the robot's rim) or explicit mounts.
+
+    The simulator takes a scan at a sample, so the sonar's rate must divide the run's a
+    whole number of times (a faster or off-beat sonar would be silently slowed or jittered).
+    """
     if table.has("count") and (table.has("mount_xy") or table.has("mount_angle_rad") or table.has("mount_angle_deg")):
         raise table.error("count", "give count (an even belt) or mount_xy and mount_angle_rad, not both")
     count = table.take_int("count", None, minimum=1)
@@ -392,7 +417,17 @@ def _read_sonar(table: Table, robot: RobotParams) -> SonarBeltParams:
         default = SonarBeltParams.default_belt(robot_radius_m=robot.radius_m, **belt)
     except RobotsimError as exc:
         raise table.error("count", str(exc)) from None
-    return _read_params(table, default)
+    sonar = _read_params(table, default)
+    ratio = run.rate_hz / sonar.rate_hz
+    if ratio < 1.0 - RATE_RATIO_TOL:
+        raise table.error("rate_hz", f"faster than the simulation (run.rate_hz = {run.rate_hz:g} Hz), got {sonar.rate_hz:g}")
+    if abs(ratio - round(ratio)) > RATE_RATIO_TOL:
+        raise table.error(
+            "rate_hz",
+            f"must divide the simulation rate (run.rate_hz = {run.rate_hz:g} Hz) a whole number of times, "
+            f"got {sonar.rate_hz:g}",
+        )
+    return sonar
 
 
 def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
@@ -402,7 +437,7 @@ def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
         "filter": table.take_str("filter", default.filter, choices=FILTERS),
         "tracker": table.take_str("tracker", default.tracker, choices=TRACKERS),
         "fusion": table.take_str("fusion", default.fusion, choices=FUSION_RULES),
-        "eps_m": table.take_float("eps_m", default.eps_m, above=0.0),
+        "eps_m": table.take_float("eps_m", default.eps_m, minimum=MIN_EPS_M),
         "q_max": table.take_int("q_max", default.q_max, minimum=0),
         "guaranteed": table.take_bool("guaranteed", default.guaranteed),
         "interval_rate_hz": table.take_float("interval_rate_hz", sonar.rate_hz, above=0.0),
@@ -411,8 +446,12 @@ def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
         "free_space": table.take_bool("free_space", sonar.lost_echo_prob == 0.0),
     }
     table.finish()
-    if values["q_max"] > sonar.count:
-        raise table.error("q_max", f"must be at most the number of sonars ({sonar.count}), got {values['q_max']}")
+    if values["q_max"] >= sonar.count:
+        raise table.error(
+            "q_max",
+            f"must be less than the number of sonars ({sonar.count}): with every reading allowed to be "
+            f"an outlier a scan constrains nothing; got {values['q_max']}",
+        )
     if values["free_space"] and sonar.lost_echo_prob > 0.0:
         raise table.error(
             "free_space",

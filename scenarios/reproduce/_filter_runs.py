@@ -60,10 +60,12 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 
 def check_counts(args: argparse.Namespace, reason_source: str) -> None:
-    """Refuse non-positive ``--runs`` / ``--steps`` with a one-line user error."""
+    """Refuse non-positive ``--runs`` / ``--steps`` and a negative ``--seed`` with a one-line user error."""
     for key in ("runs", "steps"):
         if getattr(args, key) < 1:
             raise ScenarioError(reason_source, f"--{key}", f"must be >= 1, got {getattr(args, key)}")
+    if args.seed < 0:
+        raise ScenarioError(reason_source, "--seed", f"must be >= 0, got {args.seed}")
 
 
 def relative_difference(a: np.ndarray, b: np.ndarray) -> float:

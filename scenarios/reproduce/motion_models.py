@@ -380,6 +380,8 @@ def main(args: argparse.Namespace) -> int:
     """Run the comparison and write ``table.json``, ``table.md`` and the figures."""
     if args.runs < 1:
         raise ScenarioError(None, "--runs", f"must be >= 1, got {args.runs}")
+    if args.seed < 0:
+        raise ScenarioError(None, "--seed", f"must be >= 0, got {args.seed}")
     if not (math.isfinite(args.duration) and args.duration >= 2.0 * WARM_UP_S):
         raise ScenarioError(None, "--duration", f"must be >= {2.0 * WARM_UP_S:.0f} s, got {args.duration}")
     sensors = VehicleSensorParams()

@@ -52,6 +52,32 @@ def test_sivia_range_only_matches_brute_force(seed):
     assert np.all(bx.max_width(paving.boundary) <= 0.1)
 
 
+def test_sivia_min_level_boxes_keeps_every_feasible_point_with_fewer_calls():
+    """Extra bisections of small levels skip tests but never a feasible point (brute force)."""
+    landmarks = np.array([[0.0, 0.0], [4.0, 0.0], [1.0, 3.5]])
+    truth = np.array([1.5, 1.0])
+    d = np.linalg.norm(landmarks - truth, axis=1)
+    ranges = np.stack([d - 0.3, d + 0.3], axis=1)
+    test = range_only_test(landmarks, ranges)
+    sizes = {1: [], 64: []}
+    pavings = {}
+    for minimum, calls in sizes.items():
+        counted = lambda b, calls=calls: calls.append(b.shape[0]) or test(b)  # noqa: E731
+        pavings[minimum] = sivia(counted, np.array([[-6.0, 6.0], [-6.0, 6.0]]), eps=0.05,
+                                 min_level_boxes=minimum)
+    assert sizes[1][0] == 1 and sizes[64][0] == 64  # the initial box is bisected 6 times first
+    assert len(sizes[64]) < len(sizes[1]) and min(sizes[64][:-1]) >= 64 // 2
+    g = np.linspace(-6, 6, 241)
+    grid = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    dist = np.linalg.norm(grid[:, None, :] - landmarks[None], axis=-1)
+    ok = np.all((dist >= ranges[:, 0]) & (dist <= ranges[:, 1]), axis=1)
+    for paving in pavings.values():
+        assert np.all(paving.contains(grid[ok]))
+        assert np.all(bx.max_width(paving.boundary) <= 0.05)
+    with pytest.raises(IntervalError, match="min_level_boxes"):
+        sivia(test, np.array([[-6.0, 6.0], [-6.0, 6.0]]), eps=0.05, min_level_boxes=0)
+
+
 def test_sivia_accepts_initial_subpaving_and_checks_preconditions():
     landmarks = np.array([[0.0, 0.0], [4.0, 0.0]])
     ranges = np.array([[2.0, 2.2], [2.8, 3.0]])

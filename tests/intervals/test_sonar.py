@@ -18,6 +18,7 @@ from intervals.sonar import (
     localize,
     reading_intervals,
 )
+from intervals.sonar import _sensor_boxes as sensor_boxes
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -206,6 +207,51 @@ def test_global_localisation_in_symmetric_keeps_the_twin():
         assert set(labels[inside[:, 0]]).isdisjoint(labels[inside[:, 1]])
 
 
+def test_sensor_boxes_hold_every_sensor_position_and_cone_direction():
+    """The sensor-position boxes and wedge half-planes (angle addition, arc extrema) against
+    sampled poses: headings across the axis directions, near-pi and near-2-pi widths, tiny and
+    degenerate boxes, headings beyond +-pi."""
+    rng = np.random.default_rng(4)
+    belt = SonarBelt.from_params(PARAMS)
+    n = 400
+    centre = np.column_stack([rng.uniform(-900, 900, (n, 2)), rng.uniform(-8, 8, n)])
+    quarter = np.round(centre[:, 2] / (np.pi / 2)) * (np.pi / 2)
+    centre[: n // 4, 2] = quarter[: n // 4]  # heading centred on an axis direction
+    half = np.column_stack([rng.uniform(0, 0.5, (n, 2)), np.exp(rng.uniform(-30, 1.9, n))])
+    half[n // 4 : n // 2, 2] = np.pi / 2 + rng.uniform(-1e-9, 1e-9, n // 4)  # width near pi
+    half[n // 2 : n // 2 + 20, 2] = np.pi + rng.uniform(-1e-9, 1e-9, 20)  # near 2 pi
+    half[-20:] = 0.0  # degenerate boxes: one pose
+    boxes = np.stack([centre - half, centre + half], axis=-1)
+    sb = sensor_boxes(boxes, belt)
+    m = 64
+    t = rng.uniform(0, 1, (n, m, 3))
+    t[:, :8] = np.round(t[:, :8])  # corners
+    poses = boxes[None, :, :, 0].transpose(1, 0, 2) + t * (boxes[:, None, :, 1] - boxes[:, None, :, 0])
+    c, s_ = np.cos(poses[..., 2]), np.sin(poses[..., 2])
+    mx, my = belt.mount_xy[:, 0], belt.mount_xy[:, 1]
+    sx = poses[..., 0, None] + c[..., None] * mx - s_[..., None] * my  # (n, m, k)
+    sy = poses[..., 1, None] + s_[..., None] * mx + c[..., None] * my
+    assert np.all(np.abs(sx - sb.cx[:, None]) <= sb.hx[:, None])
+    assert np.all(np.abs(sy - sb.cy[:, None]) <= sb.hy[:, None])
+    # cone points at 0.05 to 5 m along a direction of the cone: in the union half-planes
+    gamma = belt.half_aperture_rad
+    phi = poses[..., 2, None] + belt.mount_angle_rad + rng.uniform(-gamma, gamma, (n, m, 16))
+    rho = rng.uniform(0.05, 5.0, (n, m, 16))
+    qx, qy = sx + rho * np.cos(phi), sy + rho * np.sin(phi)
+    for nx, ny, k in sb.union:
+        assert np.all(nx[:, None] * qx + ny[:, None] * qy >= k[:, None])
+    # a point in the intersection half-planes is in the cone of every sampled pose
+    inter_in = np.ones(qx.shape, bool)
+    px, py = rng.uniform(-5, 5, qx.shape) + sx.mean(1, keepdims=True), sy.mean(1, keepdims=True)
+    py = py + rng.uniform(-5, 5, qx.shape)
+    for nx, ny, k in sb.inter:
+        inter_in &= nx[:, None] * px + ny[:, None] * py >= k[:, None]
+    inter_in &= sb.sure[:, None]
+    seen = np.arctan2(py - sy, px - sx) - (poses[..., 2, None] + belt.mount_angle_rad)
+    off_axis = np.abs(np.mod(seen + np.pi, 2 * np.pi) - np.pi)
+    assert inter_in.any() and np.all(off_axis[inter_in] <= gamma)
+
+
 def _hall_scan_with_outliers(truth, seed, outliers, shift_m):
     """A scan in ``hall`` at ``truth`` whose first ``outliers`` echoes are moved by
     ``shift_m``, and the prior box ``truth +- (0.5 m, 0.5 m, 0.2 rad)``."""
@@ -242,6 +288,22 @@ def test_gomne_guaranteed_set_contains_the_minimal_one():
     assert sure.paving.contains(truth[None])[0]
     inside = np.all(np.any(contains_points(sure.paving.outer, _centres(minimal.paving.outer)), 0))
     assert inside and sure.paving.volume() >= minimal.paving.volume()
+
+
+def test_gomne_minimal_set_equals_a_fresh_sivia_pass_at_its_q():
+    """GOMNE reads S_q off the reject counts of the q_max pass; a separate SIVIA pass at q on
+    S_qmax's boxes (the definition) must give the very same boxes."""
+    for seed, outliers in ((3, 1), (21, 2), (5, 0)):
+        truth = np.array([4.0 + seed / 10.0, 3.0, -2.0 + seed / 7.0])
+        scan, prior = _hall_scan_with_outliers(truth, seed=seed, outliers=outliers, shift_m=0.7)
+        sure = gomne(scan, prior, eps=0.05, q_max=3)
+        minimal = gomne(scan, prior, eps=0.05, q_max=3, guaranteed=False)
+        assert sure.consistent and minimal.q == sure.q <= outliers
+        fresh = localize(scan, sure.paving.outer, eps=0.05, q=minimal.q)
+        assert np.array_equal(fresh.outer, minimal.paving.outer)
+        if minimal.q > 0:
+            below = localize(scan, sure.paving.outer, eps=0.05, q=minimal.q - 1)
+            assert below.is_empty
 
 
 def _centres(boxes):

@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from robotsim.errors import MapError
-from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map
+from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
 
 
 @pytest.mark.parametrize(
@@ -147,3 +147,34 @@ def test_hall_landmarks_are_sparse_and_the_hall_is_not_symmetric():
 def test_unknown_builtin_map_names_the_choices():
     with pytest.raises(MapError, match="hall"):
         builtin_map("garage")
+
+
+def _same_polygon(a: np.ndarray, b: np.ndarray) -> bool:
+    return shapely.Polygon(a).normalize().equals_exact(shapely.Polygon(b).normalize(), 1e-12)
+
+
+def test_a_room_gets_the_same_outer_wall_in_every_format():
+    """Line strings (WKT, GeoJSON) closing a room get its boundary, as inline segments and a
+    polygon do; an open wall or a wall outside the largest ring gets none."""
+    room = [[0, 0], [6, 0], [6, 5], [0, 5], [0, 0]]
+    polygon = SegmentMap.from_wkt("POLYGON ((0 0, 6 0, 6 5, 0 5, 0 0))").boundary
+    maps = {
+        "wkt multilinestring": SegmentMap.from_wkt(
+            "MULTILINESTRING ((0 0, 6 0, 6 5), (6 5, 0 5, 0 0), (2 2, 3 2))"
+        ),
+        "wkt linestring": SegmentMap.from_wkt("LINESTRING (0 0, 6 0, 6 5, 0 5, 0 0)"),
+        "geojson linestrings": SegmentMap.from_geojson(
+            {"type": "FeatureCollection", "features": [
+                {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": room[:3]}},
+                {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": room[2:]}},
+            ]}
+        ),
+        "inline": SegmentMap.from_segments(
+            np.array([room[:-1], room[1:]], dtype=float).swapaxes(0, 1),
+            boundary=outer_wall(np.array([room[:-1], room[1:]], dtype=float).swapaxes(0, 1)),
+        ),
+    }
+    for name, segment_map in maps.items():
+        assert segment_map.boundary is not None and _same_polygon(segment_map.boundary, polygon), name
+    assert SegmentMap.from_wkt("LINESTRING (0 0, 6 0, 6 5, 0 5)").boundary is None  # not closed
+    assert SegmentMap.from_wkt("MULTILINESTRING ((0 0, 1 0, 1 1, 0 0), (5 5, 6 6))").boundary is None

@@ -157,3 +157,21 @@ def _read_or_none(fd: int) -> bytes:
         return os.read(fd, 4096)
     except OSError:  # Linux reports the end of a closed pty as EIO
         return b""
+
+
+@pytest.mark.parametrize("taken", ["--rrd", "--summary"])
+def test_an_output_at_a_folder_is_refused_before_running_and_writes_nothing(tmp_path, taken):
+    folder = tmp_path / "taken"
+    folder.mkdir()
+    paths = {"--rrd": tmp_path / "x.rrd", "--summary": tmp_path / "x.json", taken: folder}
+    done = robotsim("run", "--duration", "1", "--rrd", str(paths["--rrd"]), "--summary", str(paths["--summary"]), cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr == f"robotsim: error: {taken}: {folder} exists and is not a file\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"] and not any(folder.iterdir())
+
+
+def test_the_same_file_for_recording_and_summary_is_refused(tmp_path):
+    done = robotsim("run", "--duration", "1", "--rrd", "out.x", "--summary", "./out.x", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr == "robotsim: error: --summary: same file as --rrd\n"
+    assert not any(tmp_path.iterdir())

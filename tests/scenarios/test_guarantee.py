@@ -209,3 +209,45 @@ def test_reproduce_ia_fusion_short_run(tmp_path):
     # the paper's claims as the reproduction judged them (timing left out: a shared machine)
     claims = {k: v for k, v in table["claims"].items() if "slower" not in k}
     assert all(claims.values()), claims
+
+
+def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
+    from scenarios.commands import guarantee_failure
+    from scenarios.reproduce.ia_fusion import missed_guarantee
+
+    spec = load_scenario("hall")
+    assert spec.sensors.sonar.outlier_prob == 0.0 and spec.sensors.sonar.lost_echo_prob == 0.0
+    failure = guarantee_failure(spec, {"containment": 0.96})
+    assert "containment 0.96" in failure and spec.source in failure
+    assert guarantee_failure(spec, {"containment": 1.0}) is None
+    assert guarantee_failure(spec, {"containment": None}) is None  # no set at all: nothing to judge
+    for fault in ("outlier_prob", "lost_echo_prob"):
+        faulty = dataclasses.replace(spec, sensors=dataclasses.replace(
+            spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})))
+        assert guarantee_failure(faulty, {"containment": 0.96}) is None, fault
+    rows = {"sivia": {"containment": 1.0}, "imagesp": {"containment": 0.5}}
+    assert missed_guarantee(rows) == "imagesp containment 0.5"
+    assert missed_guarantee({"sivia": {"containment": 1.0}}) == ""
+
+
+@pytest.mark.parametrize("experiment", ["iukf-examples", "mukf-example", "motion-models", "ia-fusion"])
+def test_every_reproduction_refuses_a_negative_seed_in_one_line(tmp_path, capsys, experiment):
+    out = tmp_path / "out"
+    assert main(["reproduce", experiment, "--seed", "-1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("robotsim: error: ") and "--seed: must be >= 0, got -1" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_every_reproduction_writes_under_runs_reproduce_by_default():
+    import argparse
+    from pathlib import Path
+
+    from scenarios.reproduce import experiments
+
+    found = experiments()
+    assert set(found) == {"iukf-examples", "mukf-example", "motion-models", "ia-fusion"}
+    for name, module in found.items():
+        parser = argparse.ArgumentParser()
+        module.add_arguments(parser)
+        assert Path(parser.parse_args([]).out) == Path("runs/reproduce") / name, name

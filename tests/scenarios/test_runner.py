@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
+from scenarios.errors import ScenarioError
 from scenarios.metrics import summarize
 from scenarios.runner import BRANCHES, run_scenario, simulate_spec
 from scenarios.spec import builtin_names, load_scenario
@@ -104,3 +106,14 @@ def test_the_ukf_only_branch_never_sees_the_boxes(hall_runs):
     alone.run(data.count - 1)
     np.testing.assert_allclose(run.estimation.pose[0], alone.history.mean[:, 0, :3], rtol=0, atol=1e-6)
     assert np.abs(run.estimation.pose[1] - alone.history.mean[:, 1, :3]).max() > 1e-3
+
+
+def test_an_interval_error_at_run_time_is_reported_against_the_estimation_table():
+    """Settings the spec cannot catch (here built by hand past its validation) fail with the
+    scenario's file and the ``estimation`` key, not an unlocated interval message."""
+    spec = load_scenario("hall").with_run(duration_s=1.0)
+    broken = dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, heading_scale_m_per_rad=np.inf))
+    with pytest.raises(ScenarioError) as refusal:
+        run_scenario(broken)
+    assert refusal.value.source == spec.source and refusal.value.key == "estimation"
+    assert "heading_scale_m_per_rad" in refusal.value.reason

@@ -14,7 +14,7 @@ from robotsim.robot import RobotParams
 from robotsim.sensors.imu import GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.errors import ScenarioError
-from scenarios.spec import STAND_STILL, EstimationSpec, builtin_names, load_scenario, parse_scenario
+from scenarios.spec import MAX_SAMPLES, STAND_STILL, EstimationSpec, builtin_names, load_scenario, parse_scenario
 
 BASE = """
 [map]
@@ -153,9 +153,18 @@ BAD = {
     "estimation filter": ("[estimation]\nfilter = 'pf'\n", "estimation.filter", "must be one of 'ukf'"),
     "estimation tracker": ("[estimation]\ntracker = 'kalman'\n", "estimation.tracker", "'sivia', 'imagesp'"),
     "estimation fusion": ("[estimation]\nfusion = 'average'\n", "estimation.fusion", "'clamp'"),
-    "estimation eps": ("[estimation]\neps_m = 0\n", "estimation.eps_m", "must be > 0"),
+    "estimation eps": ("[estimation]\neps_m = 0\n", "estimation.eps_m", "must be >= 0.001"),
+    "estimation eps tiny": ("[estimation]\neps_m = 1e-300\n", "estimation.eps_m", "must be >= 0.001"),
     "estimation q_max negative": ("[estimation]\nq_max = -1\n", "estimation.q_max", "must be >= 0"),
-    "estimation q_max too large": ("[estimation]\nq_max = 17\n", "estimation.q_max", "at most the number of sonars (16)"),
+    "estimation q_max too large": ("[estimation]\nq_max = 17\n", "estimation.q_max", "less than the number of sonars (16)"),
+    "estimation q_max every sonar": ("[estimation]\nq_max = 16\n", "estimation.q_max", "constrains nothing"),
+    "too many samples (rate)": ("[run]\nrate_hz = 1e9\n", "run.rate_hz", "more than the 1e+07"),
+    "too many samples (dt)": ("[run]\ndt_s = 1e-9\n", "run.dt_s", "more than the 1e+07"),
+    "too many samples (duration)": ("[run]\nduration_s = 1e300\n", "run.duration_s", "more than the 1e+07"),
+    "sonar faster than the simulation": (
+        "[run]\nrate_hz = 10\n[sensors.sonar]\nrate_hz = 20\n", "sensors.sonar.rate_hz", "faster than the simulation"
+    ),
+    "sonar off the sample beat": ("[sensors.sonar]\nrate_hz = 3\n", "sensors.sonar.rate_hz", "whole number"),
     "estimation rate": ("[estimation]\ninterval_rate_hz = 0.3\n", "estimation.interval_rate_hz", "whole number"),
     "estimation rate above sonar": ("[estimation]\ninterval_rate_hz = 2\n", "estimation.interval_rate_hz", "whole number"),
     "estimation pitch": ("[estimation]\nimagesp_pitch_m = 0.01\n", "estimation.imagesp_pitch_m", ">= eps_m"),
@@ -260,3 +269,36 @@ def test_command_line_overrides_are_checked():
         spec.with_run(duration_s=float("nan"))
     with pytest.raises(ScenarioError, match="--seed"):
         spec.with_run(seed=-1)
+    for duration_s, reason in ((1e-9, "shorter than one sample"), (1e300, "more than the 1e+07")):
+        with pytest.raises(ScenarioError, match="--duration") as refusal:
+            spec.with_run(duration_s=duration_s)
+        assert reason in refusal.value.reason
+
+
+def test_the_sample_limit_and_the_sonar_beat_admit_the_edges():
+    at_limit = parse(BASE + "[run]\nduration_s = 1e5\nrate_hz = 100\n")
+    assert at_limit.run.duration_s * at_limit.run.rate_hz == MAX_SAMPLES
+    same_rate = parse(BASE + "[run]\nrate_hz = 10\n[sensors.sonar]\nrate_hz = 10\n")
+    assert same_rate.sensors.sonar.rate_hz == same_rate.run.rate_hz
+    assert parse(BASE + "[sensors.sonar]\nrate_hz = 4\n").sensors.sonar.rate_hz == 4.0  # 25 samples a scan
+    assert parse(BASE + "[estimation]\nq_max = 15\neps_m = 1e-3\n").estimation.q_max == 15
+
+
+@pytest.mark.parametrize(
+    ("name", "text"),
+    [
+        ("room.wkt", "MULTILINESTRING ((0 0, 6 0, 6 5), (6 5, 0 5, 0 0))"),
+        ("room.geojson", '{"type": "LineString", "coordinates": [[0, 0], [6, 0], [6, 5], [0, 5], [0, 0]]}'),
+    ],
+)
+def test_a_room_of_line_strings_has_an_outer_wall_for_the_start_and_waypoints(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(f'[map]\nfile = "{name}"\n[robot]\nstart_xy_m = [7, 2]\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scenario)
+    assert info.value.key == "robot.start_xy_m" and "outside" in info.value.reason
+    scenario.write_text(f'[map]\nfile = "{name}"\n[robot]\nstart_xy_m = [3, 2]\n[route]\nwaypoints_m = [[3, 2], [8, 2]]\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scenario)
+    assert info.value.key == "route.waypoints_m[1]" and "outside" in info.value.reason
