@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from localization.errors import EstimationError
-from localization.linalg import TWO_PI, wrap_angle
+from localization.linalg import wrap_angle
 
 #: Below this ``|u|`` the moments ``M_1^s`` and ``M_2^s`` use their Taylor series (their
 #: closed forms cancel to ``u^2``); above it the closed forms lose at most 1e-13 relative.
@@ -243,7 +243,7 @@ def _along_arc(x: Array, theta: Array, length: Array, turn: Array) -> Array:
     out = x.copy()
     np.add(x[..., 0], chord * np.cos(direction), out=out[..., 0])
     np.add(x[..., 1], chord * np.sin(direction), out=out[..., 1])
-    np.subtract((theta + turn + math.pi) % TWO_PI, math.pi, out=out[..., 2])  # wrap_angle(theta + turn)
+    out[..., 2] = wrap_angle(theta + turn)
     return out
 
 

@@ -264,3 +264,13 @@ def test_bad_state_shape_and_time_step_are_refused():
         mm.ctrv_transition(np.zeros(6), 0.1)
     with pytest.raises(EstimationError, match="dt_s must be finite and > 0"):
         mm.CTRA.process_noise_std(0.0)
+
+
+
+@pytest.mark.parametrize("model", [mm.CTRV, mm.CTRA, mm.CCA], ids=lambda m: m.name)
+def test_heading_just_below_minus_pi_wraps_into_the_half_open_range(model):
+    """A heading one ulp below -pi must come out in [-pi, pi), never as +pi."""
+    x = np.zeros(len(model.state_names))
+    x[model.angle_indices[0]] = np.nextafter(-np.pi, -np.inf)
+    heading = model.transition(x, 0.1)[model.angle_indices[0]]
+    assert -np.pi <= heading < np.pi
