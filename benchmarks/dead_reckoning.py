@@ -37,13 +37,10 @@ from robotsim.control import Route
 from robotsim.maps import builtin_map
 from robotsim.simulation import simulate
 
+from _common import best_seconds
+
 ROUTE = Route([[8.5, 1.0], [8.8, 4.0], [5.0, 4.3], [4.5, 7.0], [1.0, 7.0]], loop=True)
 START = (1.0, 1.0, 0.0)
-
-
-def best_s(fn, repeats: int) -> float:
-    """Best wall time of ``fn()`` in seconds."""
-    return min(timeit.repeat(fn, number=1, repeat=repeats))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -73,15 +70,15 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for name in ("ukf", "ekf"):
         settings = DeadReckoningSettings(filter=name)
-        plain = best_s(lambda: run_dead_reckoning(data, initial, settings), args.repeats)
-        fused = best_s(lambda: run_dead_reckoning(data, initial, settings, epochs, clamp), args.repeats)
+        plain = best_seconds(lambda: run_dead_reckoning(data, initial, settings), args.repeats)
+        fused = best_seconds(lambda: run_dead_reckoning(data, initial, settings, epochs, clamp), args.repeats)
         rows.append((name, plain, fused))
 
     short = args.generic_steps
     generic_us = {}
     for name in ("ukf", "ekf"):
         settings = DeadReckoningSettings(filter=name, engine="generic")
-        generic_us[name] = best_s(lambda: DeadReckoning(data, initial, settings).run(short), 1) / short * 1e6
+        generic_us[name] = best_seconds(lambda: DeadReckoning(data, initial, settings).run(short), 1) / short * 1e6
 
     ticks = np.repeat(log.wheel_ticks[:, None, :], 2 * args.runs, axis=1)
     gyro = np.repeat(log.gyro_rad_s[:, None], 2 * args.runs, axis=1)
@@ -89,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     mc_steps = min(steps, 6_000)
     mc_data = odometry_data(ticks[: mc_steps + 1], gyro[: mc_steps + 1], accel[: mc_steps + 1], 0.01, robot)
     mc_initial = initial_belief(START, [0.01, 0.01, 0.01], batch=2 * args.runs)
-    mc_s = best_s(lambda: run_dead_reckoning(mc_data, mc_initial), 1)
+    mc_s = best_seconds(lambda: run_dead_reckoning(mc_data, mc_initial), 1)
 
     small = np.eye(8)
     add_us = min(timeit.repeat(lambda: small + small, number=5000, repeat=5)) / 5000 * 1e6
