@@ -12,6 +12,12 @@ scenario's run (``--pipeline-s`` simulated seconds, 0 to skip) with its ``[estim
 settings (SIVIA, ``q_max`` 1, guaranteed, the robot's physical limits), as ``robotsim run``
 steps it (only the interval epochs are timed).
 
+Every case runs both engines of the sonar box test (:data:`intervals.sonar.ENGINES`: the
+numpy reference and the compiled kernel) on the same scans, interleaved scan by scan, and
+reports their times side by side with the median per-epoch speed-up; it exits 1 as well if
+their sets differ. The compiled kernel is loaded (compiled, on a fresh checkout) by one
+warm-up epoch before any timing.
+
     python benchmarks/intervals_epoch.py [--epochs 200] [--global-runs 20] [--repeat 3] [--seed 0]
                                          [--pipeline-s 600]
 """
@@ -19,12 +25,13 @@ steps it (only the interval epochs are timed).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 
 import numpy as np
 
-from intervals.sonar import SonarBelt, SonarScan, localize
+from intervals.sonar import ENGINES, SonarBelt, SonarScan, localize
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
@@ -51,6 +58,23 @@ def _scan(segment_map, params, belt, truth, rng) -> SonarScan:
                      segment_map.boundary)
 
 
+def _step_both(trackers, previous, scan, dt_s, repeat):
+    """One tracker epoch per engine on the same scan, interleaved: ``(results, best_s)`` dicts
+    keyed by engine (the best of ``repeat`` identical runs each)."""
+    results, best = {}, {}
+    for engine in ENGINES:
+        results[engine], best[engine] = _best_of(
+            lambda e=engine: trackers[e].step(previous[e], scan, dt_s), repeat)
+    return results, best
+
+
+def _same_sets(results) -> bool:
+    """Every engine returned the same status and the same boxes."""
+    first = results[ENGINES[0]]
+    return all(r.status == first.status and np.array_equal(r.outer, first.outer)
+               for r in results.values())
+
+
 def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str]:
     """Both trackers on the same scans of a 2 m-radius circle at 0.3 m/s (1 Hz), side by side.
     Limits 0.5 m/s and 0.5 rad/s; q_max 0 (the scans have no outliers)."""
@@ -61,27 +85,28 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
     scans = [_scan(hall, params, belt, p, rng) for p in poses]
     rows = []
     for kind in ("sivia", "imagesp"):
-        settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind)
-        tracker, previous = IntervalTracker(settings, hall.bounds), None
-        times, boxes, areas, kept = [], [], [], 0
+        trackers = {engine: IntervalTracker(TrackerSettings(
+            v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind, engine=engine),
+            hall.bounds) for engine in ENGINES}
+        previous = {engine: None for engine in ENGINES}
+        times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
         for truth, scan in zip(poses, scans):
-            best = np.inf
-            for _ in range(max(1, repeat)):
-                start = time.perf_counter()
-                result = tracker.step(previous, scan, 1.0)
-                best = min(best, time.perf_counter() - start)
+            results, best = _step_both(trackers, previous, scan, 1.0, repeat)
+            result = results["compiled"]
             if result.status == "tracking":
-                times.append(best)
+                for engine in ENGINES:
+                    times[engine].append(best[engine])
                 boxes.append(result.paving.outer.shape[0])
                 areas.append(result.paving.area_xy())
             kept += int(result.consistent and result.paving.contains(truth[None])[0])
-            previous = result.paving
-        t_ms = np.array(times) * 1e3
-        rows.append(f"| {kind} tracker epoch (circuit, limits 0.5 m/s, 0.5 rad/s) | {len(times)} | "
-                    f"{np.median(t_ms):.1f} | {np.percentile(t_ms, 95):.1f} | "
-                    f"{np.median(boxes):.0f} | {np.median(areas):.4f} |")
+            differ += int(not _same_sets(results))
+            previous = {e: r.paving for e, r in results.items()}
+        rows.append(_row(f"{kind} tracker epoch (circuit, limits 0.5 m/s, 0.5 rad/s)", times,
+                         boxes, areas))
         if kept != epochs:
-            rows.append(f"| FAILED: {kind} kept the truth in {kept} of {epochs} epochs | | | | | |")
+            rows.append(f"| FAILED: {kind} kept the truth in {kept} of {epochs} epochs |")
+        if differ:
+            rows.append(f"| FAILED: {kind}: the engines' sets differ in {differ} epochs |")
     return rows
 
 
@@ -94,30 +119,53 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
     log = simulate_spec(spec)
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    tracker = IntervalTracker(tracker_settings(spec), spec.map.bounds)
+    settings = tracker_settings(spec)
+    trackers = {engine: IntervalTracker(dataclasses.replace(settings, engine=engine),
+                                        spec.map.bounds) for engine in ENGINES}
     scans = np.arange(0, len(log.sonar_t_s), est.scan_stride(spec.sensors.sonar.rate_hz))
-    previous, last_t, times, boxes, areas, kept = None, log.sonar_t_s[scans[0]], [], [], [], 0
+    previous, last_t = {engine: None for engine in ENGINES}, log.sonar_t_s[scans[0]]
+    times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
     for index in scans:
         scan = SonarScan(spec.map.segments, belt, log.sonar_range_m[index], spec.map.boundary)
-        best = np.inf
-        for _ in range(max(1, repeat)):
-            start = time.perf_counter()
-            result = tracker.step(previous, scan, float(log.sonar_t_s[index] - last_t))
-            best = min(best, time.perf_counter() - start)
-        previous, last_t = result.paving, log.sonar_t_s[index]
-        times.append(best)
+        results, best = _step_both(trackers, previous, scan,
+                                   float(log.sonar_t_s[index] - last_t), repeat)
+        result = results["compiled"]
+        previous, last_t = {e: r.paving for e, r in results.items()}, log.sonar_t_s[index]
+        for engine in ENGINES:
+            times[engine].append(best[engine])
+        differ += int(not _same_sets(results))
         if result.consistent:
             boxes.append(result.paving.outer.shape[0])
             areas.append(result.paving.area_xy())
             kept += int(result.paving.contains(log.sonar_pose[index][None])[0])
-    t_ms = np.array(times) * 1e3
-    rows = [f"| sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {est.q_max}, "
-            f"guaranteed; all epochs) | {len(times)} | {np.median(t_ms):.1f} | "
-            f"{np.percentile(t_ms, 95):.1f} | {np.median(boxes):.0f} | {np.median(areas):.4f} |"]
+    rows = [_row(f"sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {est.q_max}, "
+                 "guaranteed; all epochs)", times, boxes, areas)]
     if kept != len(scans):
-        rows.append(f"| FAILED: pipeline tracker kept the truth in {kept} of {len(scans)} epochs "
-                    "| | | | | |")
+        rows.append(f"| FAILED: pipeline tracker kept the truth in {kept} of {len(scans)} epochs |")
+    if differ:
+        rows.append(f"| FAILED: pipeline: the engines' sets differ in {differ} epochs |")
     return rows
+
+
+def _best_of(call, repeat: int):
+    """``(call(), best wall time s)`` over ``repeat`` identical calls (at least one)."""
+    best, result = np.inf, None
+    for _ in range(max(1, repeat)):
+        start = time.perf_counter()
+        result = call()
+        best = min(best, time.perf_counter() - start)
+    return result, best
+
+
+def _row(label: str, times: dict, boxes: list, areas: list) -> str:
+    """A table row: per engine the median and p95 epoch ms, the median per-epoch speed-up of
+    the compiled engine, the median set size and (x, y) area."""
+    t = {e: np.array(v) * 1e3 for e, v in times.items()}
+    speedup = np.median(t["numpy"] / t["compiled"])
+    return (f"| {label} | {len(t['compiled'])} | {np.median(t['numpy']):.1f} | "
+            f"{np.percentile(t['numpy'], 95):.1f} | {np.median(t['compiled']):.1f} | "
+            f"{np.percentile(t['compiled'], 95):.1f} | {speedup:.1f}x | {np.median(boxes):.0f} | "
+            f"{np.median(areas):.4f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -137,12 +185,15 @@ def main(argv: list[str] | None = None) -> int:
     b = hall.bounds
     whole = np.array([b[0], b[1], [-np.pi, np.pi]])
 
+    warm_up = _scan(hall, params, belt, np.array([3.0, 3.0, 0.0]), np.random.default_rng(0))
+    for engine in ENGINES:  # load (or compile) the kernel before timing; rng left untouched
+        localize(warm_up, whole, 0.5, engine=engine)
     rows, lost = [], 0
     for label, runs in (
         ("tracking epoch (prior +-0.5 m, +-0.2 rad)", args.epochs),
         ("global localisation (whole hall)", args.global_runs),
     ):
-        times, boxes, areas = [], [], []
+        times, boxes, areas, differ = {e: [] for e in ENGINES}, [], [], 0
         for truth in _random_poses(hall, runs, rng):
             scan = _scan(hall, params, belt, truth, rng)
             if label.startswith("tracking"):
@@ -150,28 +201,30 @@ def main(argv: list[str] | None = None) -> int:
                 prior = np.stack([centre - half, centre + half], axis=-1)
             else:
                 prior = whole
-            best = np.inf
-            for _ in range(max(1, args.repeat)):
-                start = time.perf_counter()
-                paving = localize(scan, prior, eps)
-                best = min(best, time.perf_counter() - start)
-            times.append(best)
+            pavings = {}
+            for engine in ENGINES:  # interleaved: both engines on each scan in turn
+                pavings[engine], best = _best_of(
+                    lambda e=engine: localize(scan, prior, eps, engine=e), args.repeat)
+                times[engine].append(best)
+            paving = pavings["compiled"]
+            differ += int(not np.array_equal(paving.outer, pavings["numpy"].outer))
             boxes.append(paving.outer.shape[0])
             areas.append(paving.area_xy())
             lost += int(not paving.contains(truth[None])[0])
-        t = np.array(times) * 1e3
-        rows.append(f"| {label} | {runs} | {np.median(t):.1f} | {np.percentile(t, 95):.1f} | "
-                    f"{np.median(boxes):.0f} | {np.median(areas):.4f} |")
+        rows.append(_row(label, times, boxes, areas))
+        if differ:
+            rows.append(f"| FAILED: {label}: the engines' sets differ in {differ} runs |")
     rows += _circuit_rows(hall, params, belt, rng, 60, args.repeat)
     if args.pipeline_s > 0:
         rows += _pipeline_rows(args.pipeline_s, args.repeat)
     lost += sum("FAILED" in row for row in rows)
-    print("| case (hall, eps 0.05 m, 16 sonars) | runs | median ms | p95 ms | median boxes "
+    print("| case (hall, eps 0.05 m, 16 sonars) | runs | numpy median ms | numpy p95 ms "
+          "| compiled median ms | compiled p95 ms | speed-up (median) | median boxes "
           "| median (x, y) area m^2 |")
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     if lost:
-        print(f"FAILED: the truth left the set ({lost})", file=sys.stderr)
+        print(f"FAILED: the truth left a set, or the engines differ ({lost})", file=sys.stderr)
         return 1
     return 0
 

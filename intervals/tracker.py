@@ -43,7 +43,7 @@ from intervals.boxes import (
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import imagesp
-from intervals.sonar import SonarScan, gomne
+from intervals.sonar import ENGINES, SonarScan, gomne
 
 TRACKERS = ("sivia", "imagesp")
 STATUSES = ("global", "tracking", "inconsistent", "lost")
@@ -61,7 +61,9 @@ class TrackerSettings:
     ``guaranteed``: keep the ``q_max``-relaxed set, which holds the truth whenever a scan has
     at most ``q_max`` outliers (True), or GOMNE's smaller set at its minimal ``q``, which can
     miss it (False; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger
-    where few sensors see a wall, and a kidnapping is then detected later.
+    where few sensors see a wall, and a kidnapping is then detected later. ``engine``: the
+    implementation of the sonar box test, one of :data:`intervals.sonar.ENGINES` (the compiled
+    kernel by default; ``"numpy"`` is its reference, same sets).
     """
 
     v_max_m_s: float
@@ -72,6 +74,7 @@ class TrackerSettings:
     tracker: str = "sivia"
     imagesp_pitch_m: float = 0.2
     guaranteed: bool = True
+    engine: str = "compiled"
 
     def __post_init__(self) -> None:
         checks = (
@@ -86,6 +89,7 @@ class TrackerSettings:
             (self.tracker in TRACKERS, f"tracker must be one of {TRACKERS}"),
             (np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
              "imagesp_pitch_m must be >= eps_m"),
+            (self.engine in ENGINES, f"engine must be one of {ENGINES}"),
         )
         for ok, message in checks:
             if not ok:
@@ -189,7 +193,7 @@ class IntervalTracker:
     def _search(self, scan: SonarScan, initial: np.ndarray):
         s = self.settings
         return gomne(scan, initial, s.eps_m, s.q_max, s.heading_scale_m_per_rad,
-                     guaranteed=s.guaranteed)
+                     guaranteed=s.guaranteed, engine=s.engine)
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
         """One epoch from the previous set (None: the start, or the epoch after one without a

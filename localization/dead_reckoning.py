@@ -72,15 +72,23 @@ two uniform tick fractions, standard deviation ``1 / sqrt(6)`` tick (treated as 
 in fact anti-correlated, so the filter is conservative about it); the IMU white noise has the
 per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
 
-Speed: C's generic :class:`~localization.ukf.UnscentedKalmanFilter`, step by step, takes
-about 300 us a step (18 s for 600 s at 100 Hz, nine times the budget; ``BENCHMARKS.md``).
-:class:`DeadReckoning` therefore runs a lean step specialised to this model, still the same
-filter: the unscented prediction with the same sigma points and moments as the generic one,
-and the closed-form update that equals the unscented one for the linear ``h``
-(``tests/localization/test_dead_reckoning.py`` checks both against C's filters). Its
-heading is kept unwrapped inside the loop (the model is periodic in it) and wrapped on
-output; sigma-point heading offsets are wrapped as in the generic filter when the points
-are wide (``gamma >= 0.01``, e.g. the IUKF's kappa points), and not for the scaled points
+Speed: C's generic filter objects, step by step, take 190-380 us a step for the batch of two
+branches (``ekf`` .. ``iukf``; 16 s for 600 s of ``ukf`` at 100 Hz, against a budget of 6 s
+for the whole pipeline). :class:`DeadReckoning` therefore runs a compiled step specialised
+to this model (:mod:`localization.dead_reckoning_kernel`, numba), still the same filter: the
+unscented prediction with the same sigma points and moments as the generic one (or the EKF
+prediction), and the closed-form update that equals the unscented one for the linear ``h``
+(``tests/localization/test_dead_reckoning.py`` checks it against C's filters: ~1e-13 for
+the EKF and the kappa points; ~1e-8 over 300 steps for the scaled points, whose
+``1 / gamma^2`` amplifies rounding, as between any two implementations). One call runs a
+whole ``run()`` stretch, all samples and all runs, and writes the history in place.
+Measured (``benchmarks/dead_reckoning.py``, 600 s of ``hall``, batch of two): 3.3 us a step
+for ``ukf``/``iukf``, 1.9 us for ``ekf``, 80-115 times the generic filters; in the pipeline
+(600 calls) 0.23 s instead of 4.4 s. The first run on a machine compiles the kernel
+(about 3 s; cached beside the module after that). The heading is kept unwrapped inside the
+loop (the model is periodic in it) and wrapped in the history and the belief; sigma-point
+heading offsets are wrapped as in the generic filter when the points are wide
+(``gamma >= 0.01``, e.g. the IUKF's kappa points), and not for the scaled points
 (``gamma ~ 3e-3``), where that needs ``sigma_theta < pi / gamma`` (1000 rad; checked).
 """
 
@@ -96,19 +104,17 @@ from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.iukf import IteratedUnscentedKalmanFilter
-from localization.linalg import INV_TWO_PI, TWO_PI, wrap_angle
+from localization.dead_reckoning_kernel import B_ACCEL, B_GYRO, D_WHEEL, N_STATES, OMEGA, THETA, V, X, Y, run_steps
+from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
 from localization.ukf import UnscentedKalmanFilter
 
-X, Y, THETA, V, OMEGA, B_GYRO, B_ACCEL, D_WHEEL = range(8)
-N_STATES = 8
 STATE_NAMES = ("x_m", "y_m", "theta_rad", "v_m_s", "omega_rad_s", "b_gyro_rad_s", "b_accel_m_s2", "d_wheel")
 ANGLE_INDICES = (THETA,)
 FILTERS = ("ukf", "iukf", "ekf", "iekf")
 _G_M_S2 = 9.80665
-_OMEGA_V = slice(OMEGA, V - 1, -1)  # (omega, v) as a view of the state
-_WRAP_GAMMA = 0.01  # sigma-point spread from which the lean step wraps heading offsets
+_WRAP_GAMMA = 0.01  # sigma-point spread from which the compiled step wraps heading offsets
 
 
 def _positive(owner: str, **values) -> None:
@@ -382,19 +388,22 @@ class DeadReckoningSettings:
             ``estimation.filter``).
         points: sigma points of the unscented filters; ``None`` takes each filter's default
             (scaled points ``alpha = 1e-3`` for the UKF, kappa points for the IUKF, paper 000).
-        engine: ``"lean"`` (the specialised step, default) or ``"generic"`` (C's filter objects
-            step by step: the reference, about ten times slower).
+        engine: ``"compiled"`` (the specialised step, :mod:`localization.dead_reckoning_kernel`,
+            default) or ``"generic"`` (C's filter objects step by step: the reference, about a
+            hundred times slower).
     """
 
     filter: Literal["ukf", "iukf", "ekf", "iekf"] = "ukf"
     points: SigmaPointScheme | None = None
-    engine: Literal["lean", "generic"] = "lean"
+    engine: Literal["compiled", "generic"] = "compiled"
 
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
             raise EstimationError(f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}")
-        if self.engine not in ("lean", "generic"):
-            raise EstimationError(f"DeadReckoningSettings: engine must be 'lean' or 'generic', got {self.engine!r}")
+        if self.engine not in ("compiled", "generic"):
+            raise EstimationError(
+                f"DeadReckoningSettings: engine must be 'compiled' or 'generic', got {self.engine!r}"
+            )
 
     @property
     def unscented(self) -> bool:
@@ -478,13 +487,13 @@ class DeadReckoning:
         self._mean = np.array(initial.mean)
         self._cov = np.array(initial.cov)
         self._record(0)
-        if settings.engine == "lean":
-            self._lean = _LeanStep(data, settings, batch)
+        self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
+        if settings.engine == "compiled":
+            self._compiled = _CompiledStep(data, settings)
         else:
             self._generic = settings.generic_filter()
             self._process = data.process_model()
             self._measurement = data.measurement_model()
-            self._speed_correction = np.zeros(batch)  # the last update's correction of v
 
     @property
     def belief(self) -> Gaussian:
@@ -519,8 +528,10 @@ class DeadReckoning:
 
         Raises:
             EstimationError: an index behind the current one or past the data; a heading
-                too uncertain for the lean step; a covariance that stops being positive
-                definite (from the Cholesky factorisation).
+                too uncertain for the compiled step's scaled points; a covariance (or, in the
+                compiled step, an innovation covariance) that stops being positive definite
+                (from the Cholesky factorisation). The belief and ``index`` then stay where
+                they were.
         """
         if not (self.index <= until_index < self.data.count):
             raise EstimationError(
@@ -528,13 +539,10 @@ class DeadReckoning:
             )
         start = self.index + 1
         if until_index >= start:
-            if self.settings.engine == "lean":
-                self._mean, self._cov = self._lean.run(
-                    self._mean, self._cov, start, until_index + 1,
+            if self.settings.engine == "compiled":
+                self._mean, self._cov, self._speed_correction = self._compiled.run(
+                    self._mean, self._cov, self._speed_correction, start, until_index + 1,
                     self._mean_hist, self._cov_hist,
-                )
-                self._mean_hist[start : until_index + 1, :, THETA] = wrap_angle(
-                    self._mean_hist[start : until_index + 1, :, THETA]
                 )
             else:
                 self._run_generic(start, until_index + 1)
@@ -565,139 +573,55 @@ class DeadReckoning:
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
 
 
-class _LeanStep:
-    """The specialised step: unscented (or linearised) prediction, closed-form update.
+class _CompiledStep:
+    """The arguments of :func:`~localization.dead_reckoning_kernel.run_steps` that stay fixed
+    over a run (contiguous float64 arrays, one compiled signature), and the checks around it.
 
-    The arithmetic is that of C's filters on :meth:`OdometryData.process_model` and
-    :meth:`OdometryData.measurement_model`, rearranged to cut the numpy calls (about 30 a
-    step for the whole batch) with the constants built once:
-
-    - sigma points ``X = x + S L^T`` with the constant ``S = [0; gamma I; -gamma I]``;
-    - the linear part of ``f`` as one product ``X A^T``; the motion of ``x, y`` as
-      ``dt v (cos, sin)(theta + dt omega / 2)``, both from one ``cos`` of
-      ``(heading, heading - pi/2)``;
-    - the moments about ``X_0`` of :mod:`localization.sigma_points` in one product: the
-      deviations ``D_i`` and the shift ``d`` stacked as rows with the weights
-      ``(W_i, ..., c0 - 1)`` and the rows of ``L_Q^T`` (``Q = L_Q L_Q^T``) with weight 1, so
-      ``P- = M^T diag(w) M`` is one product;
-    - the updated covariance is symmetrised only for the EKF: the unscented prediction reads
-      the lower triangle (Cholesky) and rebuilds the covariance every step, so rounding
-      asymmetry cannot build up; beliefs handed out are symmetrised.
+    The unscented filters pass their sigma points' ``gamma``, ``W_i = 1 / (2 gamma^2)`` and
+    ``c0``; heading offsets are wrapped (as in the generic filter) when the points are wide
+    (``gamma >= 0.01``, e.g. the IUKF's kappa points) and not for the scaled points
+    (``gamma ~ 3e-3``), which needs ``gamma sigma_theta < pi``, checked after each stretch.
     """
 
-    def __init__(self, data: OdometryData, settings: DeadReckoningSettings, batch: int) -> None:
-        self.data = data
+    def __init__(self, data: OdometryData, settings: DeadReckoningSettings) -> None:
+        count = data.count
+
+        def compiled_input(values):  # a read-only array would be a second signature to compile
+            return np.require(values, dtype=float, requirements=("C", "W"))
+
+        self.accel = compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
+        self.z = compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
+        self.q_cov, self.r_cov = compiled_input(data.Q), compiled_input(data.R)
+        self.dt_s = float(data.dt_s)
+        self.wheel_base_m = float(data.wheel_base_m)
         self.unscented = settings.unscented
-        self.linear_t = _linear_part(data.dt_s).T.copy()
-        # points @ motion_map = (heading, heading, dt v), heading = theta + dt omega / 2
-        self.motion_map = np.zeros((N_STATES, 3))
-        self.motion_map[THETA, :2] = 1.0
-        self.motion_map[OMEGA, :2] = 0.5 * data.dt_s
-        self.motion_map[V, 2] = data.dt_s
         if self.unscented:
             weights = settings.sigma_points().weights(N_STATES)
-            self.gamma = weights.gamma
-            eye = np.eye(N_STATES)
-            self.spread = weights.gamma * np.vstack([np.zeros((1, N_STATES)), eye, -eye])  # (2n+1, n)
-            self.dev_weights = np.asarray(weights.deviation_weights)
-            # rows of the moment product: D_1..D_2n (W_i), d (c0 - 1), L_Q^T (1): P- in one product
-            self.moment_weights = np.concatenate([weights.deviation_weights, [weights.c0 - 1.0], np.ones(N_STATES)])
-            self.quarter_turn = np.array([0.0, 0.5 * math.pi])  # cos(h - pi/2) = sin(h)
-            self.moments = np.empty((batch, 3 * N_STATES + 1, N_STATES))
-            self.moments[:, 2 * N_STATES + 1 :] = np.linalg.cholesky(data.Q).T  # rows r: sum r r^T = Q
-            # wide points (kappa: gamma = sqrt 3) can put heading offsets past pi: wrap them as
-            # the generic filter does; the tiny scaled points (gamma ~ 3e-3) never do (checked)
-            self.wrap_offsets = weights.gamma >= _WRAP_GAMMA
+            self.gamma, self.weight, self.c0 = float(weights.gamma), float(weights.wi), float(weights.c0)
         else:
-            self.jac = np.broadcast_to(_linear_part(data.dt_s), (batch, N_STATES, N_STATES)).copy()
-        # per-step arrays, indexed by k in the loop, shaped to broadcast against the batch
-        count = data.count
-        self.drive = (data.dt_s * data.accel_input_m_s2).reshape(count, -1, 1)  # (N, B|1, 1)
-        self.z = data.z.reshape(count, -1, 1, 3)  # (N, B|1, 1, 3)
-        # H(k): the constant entries once, D_WHEEL's column per step
-        self.h = measurement_matrix(np.zeros((batch, N_STATES)), data.wheel_base_m)
-        self.h_t = np.ascontiguousarray(self.h.mT)
-        # H[(0, 1), D_WHEEL] = h_scale * (omega, v) of the regressor state (measurement_matrix):
-        # the prediction mean[:, OMEGA_V] less the last update's correction of v, (0, dv)
-        self.h_scale = np.array([-0.25 * data.wheel_base_m, -1.0 / data.wheel_base_m])
-        self.correction = np.zeros((batch, 2))  # carried from run to run
+            self.gamma = self.weight = self.c0 = 0.0
+        self.wrap_offsets = self.gamma >= _WRAP_GAMMA
 
-    def run(self, mean, cov, start, stop, mean_hist, cov_hist):
-        """Steps ``start..stop-1``; records each into the history arrays; returns the belief."""
-        dt = self.data.dt_s
-        half_dt = 0.5 * dt
-        q_cov, r_cov = self.data.Q, self.data.R
-        linear_t = self.linear_t
-        drive, z_all, h, h_t, h_scale = self.drive, self.z, self.h, self.h_t, self.h_scale
-        correction = self.correction
-        h_column, h_t_row = h[:, :2, D_WHEEL], h_t[:, D_WHEEL, :2]  # views written every step
-        multiply = np.multiply
-        cholesky, solve, cos = np.linalg.cholesky, np.linalg.solve, np.cos
-        recorded = cov_hist.shape[-1]
-        if self.unscented:
-            spread, dev_weights, moment_weights = self.spread, self.dev_weights, self.moment_weights
-            quarter_turn, moments = self.quarter_turn, self.moments
-            wrap_offsets = self.wrap_offsets
-            two_n = 2 * N_STATES
-        else:
-            jac = self.jac
-            turns = np.array([0.0, 0.5 * math.pi, -0.5 * math.pi, 0.0])
-        motion_map, unscented = self.motion_map, self.unscented
-        k = start
-        try:
-            for k in range(start, stop):
-                if unscented:
-                    # prediction: the unscented transform (paper 001 eq. 25-27), moments about X_0
-                    points = mean[:, None, :] + spread @ cholesky(cov).mT  # (B, 2n+1, n)
-                    images = points @ linear_t
-                    images[..., V] += drive[k]
-                    motion = points @ motion_map
-                    images[..., :2] += motion[..., 2:] * cos(motion[..., :2] - quarter_turn)  # dt v (cos, sin)
-                    np.subtract(images[:, 1:], images[:, :1], out=moments[:, :two_n])
-                    if wrap_offsets:
-                        offsets = moments[:, :two_n, THETA]
-                        offsets -= TWO_PI * np.round(offsets * INV_TWO_PI)
-                    shift = dev_weights @ moments[:, :two_n]  # d = sum W_i D_i
-                    moments[:, two_n] = shift
-                    mean = images[:, 0] + shift
-                    cov = (moments.mT * moment_weights) @ moments  # sum W_i D_i D_i^T + (c0 - 1) d d^T + Q
-                else:
-                    # prediction: x- = f(x), P- = F P F^T + Q
-                    motion = mean @ motion_map  # (heading, heading, dt v)
-                    trig = cos(motion[:, :1] - turns)  # (cos, sin, -sin, cos) of the heading
-                    dt_v = motion[:, 2:]
-                    jac[:, :2, THETA] = dt_v * trig[:, 2:]  # d(x, y)/d theta = dt v (-sin, cos)
-                    jac[:, :2, V] = dt * trig[:, :2]
-                    jac[:, :2, OMEGA] = half_dt * jac[:, :2, THETA]
-                    mean = mean @ linear_t
-                    mean[:, V] += drive[k][:, 0]
-                    mean[:, :2] += dt_v * trig[:, :2]
-                    cov = jac @ cov @ jac.mT + q_cov
-                # update, linear h: S = H P H^T + R, K^T = S^-1 H P, x += (z - H x) K^T, P -= P H^T K^T
-                multiply(mean[:, _OMEGA_V] - correction, h_scale, out=h_column)  # H(k), see measurement_matrix
-                h_t_row[...] = h_column
-                cross = cov @ h_t
-                gain_t = solve(h @ cross + r_cov, cross.mT)
-                innovation = z_all[k] - mean[:, None, :] @ h_t
-                predicted, mean = mean, mean + (innovation @ gain_t)[:, 0]
-                np.subtract(mean[:, V], predicted[:, V], out=correction[:, 1])
-                cov = cov - cross @ gain_t
-                if not unscented:  # the unscented prediction rebuilds P from its lower triangle
-                    cov += cov.mT  # symmetrised: (P + P^T) / 2
-                    cov *= 0.5
-                mean_hist[k] = mean
-                cov_hist[k] = cov[:, :recorded, :recorded]
-        except np.linalg.LinAlgError as exc:
+    def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist):
+        """Samples ``start..stop-1`` from the belief ``mean (B, 8)``, ``cov (B, 8, 8)`` at
+        ``start - 1`` (left unchanged); records rows ``start..stop-1`` of the history arrays
+        and returns the new ``(mean, cov, speed_correction)``."""
+        mean, cov, speed_correction = mean.copy(), cov.copy(), speed_correction.copy()
+        failed = run_steps(
+            mean, cov, speed_correction, start, stop, self.accel, self.z, self.q_cov, self.r_cov,
+            self.dt_s, self.wheel_base_m, self.unscented, self.gamma, self.weight, self.c0, self.wrap_offsets,
+            mean_hist, cov_hist,
+        )
+        if failed >= 0:
             raise EstimationError(
-                f"dead reckoning: the covariance at sample {k} is not positive definite ({exc})"
-            ) from exc
-        too_wide = unscented and not self.wrap_offsets and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2
-        if too_wide:
-            raise EstimationError(
-                "dead reckoning: the heading is too uncertain for the lean step (gamma * sigma_theta >= pi); "
-                "use engine='generic' or smaller sigma-point spread"
+                f"dead reckoning: at sample {failed} the covariance is not positive definite or the mean not finite"
             )
-        return mean, cov
+        if self.unscented and not self.wrap_offsets and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2:
+            raise EstimationError(
+                "dead reckoning: the heading is too uncertain for the compiled step (gamma * sigma_theta >= pi); "
+                "use engine='generic' or sigma points with gamma >= 0.01"
+            )
+        return mean, cov, speed_correction
 
 
 def run_dead_reckoning(data: OdometryData, initial: Gaussian,

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from intervals import boxes as bx
 from intervals import interval as ia
 from intervals.errors import IntervalError
-from intervals.imagesp import imagesp
+from intervals.imagesp import _unique_rows, imagesp
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 
 
@@ -178,3 +178,11 @@ def test_wrap_headings_keeps_every_pose():
     pts = (boxes[:, None, :, 0] + u * w[:, None, :]).reshape(-1, 3)
     pts[:, 2] = np.mod(pts[:, 2] + np.pi, 2 * np.pi) - np.pi
     assert np.all(np.any(bx.contains_points(wrapped, pts), axis=0))
+
+
+def test_imagesp_unique_rows_equals_numpy_unique():
+    """IMAGESP's cell deduplication returns exactly ``np.unique(idx, axis=0)`` (rows and order)."""
+    rng = np.random.default_rng(7)
+    for rows, cols, spread in [(1, 3, 2), (50, 3, 3), (400, 3, 5), (300, 2, 1000), (200, 1, 4)]:
+        idx = rng.integers(-spread, spread, size=(rows, cols), dtype=np.int64)
+        np.testing.assert_array_equal(_unique_rows(idx), np.unique(idx, axis=0))

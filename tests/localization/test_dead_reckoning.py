@@ -1,9 +1,10 @@
 """The dead-reckoning filter on simulated logs: closed-form motions, tracking with a drift
-that grows with time, covariance consistency (NEES), the lean step against C's filters,
-batched against looped, and its refusals."""
+that grows with time, covariance consistency (NEES), the compiled step against C's generic
+filters (the reference), batched against looped, and its refusals."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -141,7 +142,7 @@ def test_wheel_radius_difference_and_biases_are_learned(seed):
 
 
 @pytest.mark.parametrize("name", ["ukf", "iukf", "ekf", "iekf"])
-def test_lean_step_equals_c_filters(route_logs, name):
+def test_compiled_step_equals_c_filters(route_logs, name):
     logs = route_logs[:2]
     steps = 301
     ticks = np.stack([log.wheel_ticks[:steps] for log in logs], axis=1)  # per-run data (N, 2, 2)
@@ -154,19 +155,46 @@ def test_lean_step_equals_c_filters(route_logs, name):
     initial = Gaussian(start.mean + [[0.0] * 3 + [0.2, 0.1, 0.0, 0.0, 0.0]] * 2,
                        start.cov + mixing @ mixing.mT, ANGLE_INDICES)
     results = {}
-    for engine in ("lean", "generic"):
+    for engine in ("compiled", "generic"):
         runner = DeadReckoning(data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True)
         runner.run(150)
         nudged = runner.belief
         runner.replace(Gaussian(nudged.mean + [0.1, -0.1, 0.05, 0, 0, 0, 0, 0], nudged.cov, ANGLE_INDICES))
         runner.run(steps - 1)
         results[engine] = runner.history
-    lean, generic = results["lean"], results["generic"]
-    # the scaled points' tiny spread (alpha = 1e-3) turns rounding into ~1e-9 m after 300
-    # steps (see localization.sigma_points); the other filters agree to ~1e-14
-    assert np.abs(lean.mean - generic.mean).max() < 1e-8
+    assert_same_history(results["compiled"], results["generic"], 1e-8, 1e-9)
+
+
+def assert_same_history(compiled, generic, mean_atol, cov_rtol):
+    """Means equal to ``mean_atol`` (headings compared wrapped), covariances to ``cov_rtol`` of
+    ``std_i std_j``. The scaled points' tiny spread (alpha = 1e-3) turns rounding into ~1e-9 m
+    after 300 steps (see localization.sigma_points); the other filters agree to ~1e-13."""
+    difference = compiled.mean - generic.mean
+    difference[..., THETA] = wrap(difference[..., THETA])
+    assert np.abs(difference).max() < mean_atol
     std = np.sqrt(np.diagonal(generic.cov, axis1=-2, axis2=-1))
-    assert (np.abs(lean.cov - generic.cov) / (std[..., :, None] * std[..., None, :])).max() < 1e-9
+    assert (np.abs(compiled.cov - generic.cov) / (std[..., :, None] * std[..., None, :])).max() < cov_rtol
+
+
+@pytest.mark.parametrize("name, tolerance", [("ukf", 1e-8), ("ekf", 1e-11)])  # ~3e-9 and ~1e-13 seen
+def test_compiled_step_equals_c_filters_across_the_heading_wrap(route_logs, name, tolerance):
+    # headings start at the edges of [-pi, pi) and turn across them; the data are shared by
+    # the batch (the other comparison uses per-run data)
+    data = data_of(route_logs[2])
+    start = initial_belief(START, [0.02, 0.02, 0.05])
+    mean = np.array(start.mean)
+    mean[:, THETA] = [math.pi - 1e-9, -math.pi]
+    mean[:, 4] = [0.3, -0.3]  # turning both ways from the start
+    initial = Gaussian(mean, start.cov, ANGLE_INDICES)
+    histories = {}
+    for engine in ("compiled", "generic"):
+        runner = DeadReckoning(data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True)
+        runner.run(200)
+        histories[engine] = runner.history
+    heading = histories["compiled"].mean[..., THETA]
+    assert ((heading >= -math.pi) & (heading < math.pi)).all()
+    assert (np.abs(heading) > 3.0).all() and (heading > 0).any() and (heading < 0).any()  # both sides, near pi
+    assert_same_history(histories["compiled"], histories["generic"], tolerance, tolerance)
 
 
 def test_iterated_filters_equal_their_plain_ones_on_the_linear_measurement(route_logs):
@@ -250,6 +278,8 @@ def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
         NominalRobot(0.05, -0.3, 2048)
     with pytest.raises(EstimationError, match="filter must be one of"):
         DeadReckoningSettings(filter="kalman")
+    with pytest.raises(EstimationError, match="engine must be 'compiled' or 'generic'"):
+        DeadReckoningSettings(engine="fast")
     runner = DeadReckoning(data_of(log), initial_belief(START, [0.01] * 3))
     runner.run(10)
     with pytest.raises(EstimationError, match="until_index"):
@@ -258,10 +288,10 @@ def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
         runner.replace(initial_belief(START, [0.01] * 3, batch=3))
 
 
-def test_wide_heading_uncertainty_lean_equals_generic_or_is_refused(route_logs):
+def test_wide_heading_uncertainty_compiled_equals_generic_or_is_refused(route_logs):
     data = data_of(route_logs[0])
     wide = initial_belief(START, [0.01, 0.01, 2.5])  # kappa points reach 4.3 rad from the mean
-    runs = [DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e)) for e in ("lean", "generic")]
+    runs = [DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e)) for e in ("compiled", "generic")]
     for runner in runs:
         runner.run(50)
     assert np.abs(runs[0].history.mean - runs[1].history.mean).max() < 1e-12
@@ -271,14 +301,27 @@ def test_wide_heading_uncertainty_lean_equals_generic_or_is_refused(route_logs):
         DeadReckoning(data, hopeless).run(10)
 
 
-def test_a_covariance_that_is_not_positive_definite_is_refused(route_logs):
-    start = initial_belief(START, [0.01] * 3)
-    cov = np.array(start.cov)
-    cov[:, 3, 3] = -1.0  # a negative speed variance
-    for name in ("ukf", "iukf"):  # the unscented filters factorise it (the EKF never does, as C's)
-        with pytest.raises(EstimationError, match="not positive definite"):
-            DeadReckoning(data_of(route_logs[0]), Gaussian(start.mean, cov, ANGLE_INDICES),
-                          DeadReckoningSettings(filter=name)).run(20)
+@pytest.mark.parametrize("name", ["ukf", "iukf", "ekf", "iekf"])
+def test_a_covariance_that_is_not_positive_definite_is_refused_and_the_belief_kept(route_logs, name):
+    data = data_of(route_logs[0])
+    runner = DeadReckoning(data, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name))
+    belief = runner.run(30)
+    cov = np.array(belief.cov)
+    cov[:, 3, 3] = -1.0  # a negative speed variance: the unscented prediction cannot factorise
+    runner.replace(Gaussian(belief.mean, cov, ANGLE_INDICES))  # it, nor the update S = H P H^T + R
+    with pytest.raises(EstimationError, match="at sample 31 the covariance is not positive definite"):
+        runner.run(60)
+    assert runner.index == 30 and np.array_equal(runner.belief.cov, cov)  # left where it was
+
+
+@pytest.mark.parametrize("name", ["ukf", "ekf"])
+def test_a_mean_that_is_not_finite_is_refused_naming_the_sample(route_logs, name):
+    data = data_of(route_logs[0])
+    accel = np.array(data.accel_input_m_s2)
+    accel[40] = np.nan  # past odometry_data's checks: OdometryData built by hand
+    broken = dataclasses.replace(data, accel_input_m_s2=accel)
+    with pytest.raises(EstimationError, match="at sample 40 .* the mean not finite"):
+        DeadReckoning(broken, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)).run(60)
 
 
 # --------------------------------------------------------------------------- long runs

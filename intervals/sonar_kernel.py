@@ -1,0 +1,302 @@
+r"""The compiled sonar box test (numba): every box, sensor and segment of one test call at once.
+
+:func:`intervals.sonar.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
+(one SIVIA level). For each pose box the kernel builds the sensor-position boxes and the wedge
+half-planes of every sensor, keeps the segments within reach of their hull, and runs the hit
+test, the free-space test and (optionally) the inner acceptance of the module doc of
+:mod:`intervals.sonar` on every (segment, used sensor) pair, with scalar loops instead of
+numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
+sensors leave. It is the same computation as the numpy implementation there (the
+reference it is tested against, ``tests/intervals/test_sonar_kernel.py``): the same formulas,
+evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
+into fused multiply-adds without ``fastmath``), with the same ``GUARD_M`` biases, sensor-box
+margin, ``_arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
+outward-rounded reading intervals (computed once per scan by numpy) and the same ``cos`` and
+``sin`` of the heading bounds (computed by numpy per call, so that no libm-versus-numpy ulp
+difference can arise; it would be covered anyway: the error budget of :mod:`intervals.sonar`
+allows a few ulps, ``1e-15``, per direction component against a sensor-box widening of ``1e-9 (1
++ |m_i|)`` m and ``GUARD_M = 1e-5`` m on every comparison). ``hypot`` is the C library's in
+both, ``abs``, ``min`` and ``max`` are exact. So every verdict equals the reference's bit for bit
+and every guarantee of :mod:`intervals.sonar` holds unchanged; the tests check equality over
+random cases.
+
+Shapes and units: ``N`` boxes ``(N, 3, 2)`` (x m, y m, theta rad; lower, upper), ``m`` segments
+``(m, 2, 2)`` world frame m, ``k`` sensors. Every float array is float64 and C-contiguous, the
+kinds int8 and the outputs bool: one compiled signature. The machine code is cached beside the
+module (``cache=True``), so only the first use on a machine compiles it (about 3 s).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+IGNORED, ECHO, FREE = 0, 1, 2
+"""Kinds of sensor constraint: no information, an echo ``[lo, hi]``, free space to ``d_max``
+(re-exported by :mod:`intervals.sonar`)."""
+
+# columns of the belt table (k, 8) built by intervals.sonar.SonarBelt.kernel_table
+COS_BETA, SIN_BETA, R_LO, R_HI, COS_RIGHT, SIN_RIGHT, COS_LEFT, SIN_LEFT = range(8)
+
+# columns of the per-sensor scratch rows of one box: sensor box, union and intersection
+# half-planes (nx, ny, c) x 2 each
+CX, CY, HX, HY = range(4)
+UNION = 4
+INTER = 10
+SENSOR_COLUMNS = 16
+
+
+@numba.njit(cache=True)
+def _max(a: float, b: float) -> float:
+    """``np.maximum`` on scalars (a NaN operand gives NaN)."""
+    if a > b or a != a:
+        return a
+    return b
+
+
+@numba.njit(cache=True)
+def _min(a: float, b: float) -> float:
+    """``np.minimum`` on scalars (a NaN operand gives NaN)."""
+    if a < b or a != a:
+        return a
+    return b
+
+
+@numba.njit(cache=True)
+def _nearest_distance(px, py, ax, ay, ex, ey):
+    """``(qx, qy, dist)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p``
+    (as ``intervals.sonar._nearest_on_segment``)."""
+    ee = ex * ex + ey * ey
+    t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    qx, qy = ax + t * ex, ay + t * ey
+    return qx, qy, math.hypot(qx - px, qy - py)
+
+
+@numba.njit(cache=True)
+def _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m):
+    """Lower bound of the distance between the segment ``a + t e`` and the box ``(c, h)`` (as
+    ``intervals.sonar._segment_box_gap``, which states why it is a bound)."""
+    qx, qy, dist = _nearest_distance(cx, cy, ax, ay, ex, ey)
+    if dist >= near_switch_m:
+        return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy)
+    return dist - math.hypot(hx, hy)
+
+
+@numba.njit(cache=True)
+def _point_box_farthest(px, py, cx, cy, hx, hy):
+    """Largest distance from the point ``p`` to the points of the box ``(c, h)``."""
+    return math.hypot(abs(px - cx) + hx, abs(py - cy) + hy)
+
+
+@numba.njit(cache=True)
+def _clip(ax, ay, ex, ey, planes, first):
+    """Parameter range ``(t_lo, t_hi)`` of ``a + t e``, t in [0, 1], in the two half-planes
+    ``nx qx + ny qy >= c`` stored as ``planes[first:first + 6] = (nx, ny, c, nx, ny, c)``;
+    empty where ``t_lo > t_hi`` (as ``intervals.sonar._clip_segment``)."""
+    t_lo, t_hi = 0.0, 1.0
+    for h in range(first, first + 6, 3):
+        nx, ny, c = planes[h], planes[h + 1], planes[h + 2]
+        g0 = nx * ax + ny * ay - c
+        ge = nx * ex + ny * ey
+        if ge > 0:
+            t_lo = _max(t_lo, -g0 / ge)
+        elif ge < 0:
+            t_hi = _min(t_hi, -g0 / ge)
+        elif ge == 0 and not g0 >= 0:
+            t_hi = -np.inf
+    return t_lo, t_hi
+
+
+@numba.njit(cache=True)
+def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
+    """Whether the arc from ``u_a`` counter-clockwise to ``u_b`` holds the axis direction
+    ``e`` (as ``intervals.sonar._arc_reaches``, slack towards "reached")."""
+    det_a = ux_a * ey - uy_a * ex
+    det_b = ex * uy_b - ey * ux_b
+    if half_turn:
+        return not (det_a < -slack and det_b < -slack)
+    return det_a >= -slack and det_b >= -slack
+
+
+@numba.njit(cache=True)
+def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
+    """One wedge-edge half-plane ``(nx, ny, c)`` into ``out[at:at + 3]`` (as one turn of
+    ``intervals.sonar._wedge_constraints``)."""
+    nx, ny = -flip * uy, flip * ux
+    spread = abs(nx) * hx + abs(ny) * hy
+    out[at] = nx
+    out[at + 1] = ny
+    out[at + 2] = nx * cx + ny * cy + sign * (spread + guard_m)
+
+
+@numba.njit(cache=True)
+def _sensor_rows(box, cos_theta, sin_theta, belt, half_aperture_rad, margin_m, guard_m,
+                 arc_slack, angle_margin_rad, trig_limit_rad, rows):
+    """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
+    heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
+    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar._sensor_boxes``); returns ``sure``
+    (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
+    theta_lo, theta_hi = box[2, 0], box[2, 1]
+    width = theta_hi - theta_lo
+    trusted = abs(theta_lo) < trig_limit_rad and abs(theta_hi) < trig_limit_rad
+    full = not trusted or width >= 2.0 * np.pi - angle_margin_rad
+    half_turn = width >= np.pi
+    narrow = trusted and width + 2.0 * half_aperture_rad < np.pi - angle_margin_rad
+    sure = trusted and width < 2.0 * half_aperture_rad - angle_margin_rad
+    cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
+    for i in range(belt.shape[0]):
+        cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
+        ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
+        bx, by = cos_hi * cb - sin_hi * sb, sin_hi * cb + cos_hi * sb  # theta_hi + beta
+        reach_px = full or _arc_reaches(ax, ay, bx, by, 1.0, 0.0, half_turn, arc_slack)
+        reach_py = full or _arc_reaches(ax, ay, bx, by, 0.0, 1.0, half_turn, arc_slack)
+        reach_nx = full or _arc_reaches(ax, ay, bx, by, -1.0, 0.0, half_turn, arc_slack)
+        reach_ny = full or _arc_reaches(ax, ay, bx, by, 0.0, -1.0, half_turn, arc_slack)
+        cos_min = -1.0 if reach_nx else _min(ax, bx)
+        cos_max = 1.0 if reach_px else _max(ax, bx)
+        sin_min = -1.0 if reach_ny else _min(ay, by)
+        sin_max = 1.0 if reach_py else _max(ay, by)
+        r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
+        x_lo = box[0, 0] + _min(r_lo * cos_min, r_hi * cos_min) - margin_m
+        x_hi = box[0, 1] + _max(r_lo * cos_max, r_hi * cos_max) + margin_m
+        y_lo = box[1, 0] + _min(r_lo * sin_min, r_hi * sin_min) - margin_m
+        y_hi = box[1, 1] + _max(r_lo * sin_max, r_hi * sin_max) + margin_m
+        cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
+        hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
+        rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
+        # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
+        cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
+        cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
+        right_lo_x, right_lo_y = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
+        right_hi_x, right_hi_y = cos_hi * cr - sin_hi * sr, sin_hi * cr + cos_hi * sr
+        left_lo_x, left_lo_y = cos_lo * cl - sin_lo * sl, sin_lo * cl + cos_lo * sl
+        left_hi_x, left_hi_y = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
+        row = rows[i]
+        # union of the wedges over the box (a superset; unused, c = -inf, unless narrow)
+        _wedge_planes(right_lo_x, right_lo_y, 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
+        _wedge_planes(left_hi_x, left_hi_y, -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
+        if not narrow:
+            row[UNION + 2] = -np.inf
+            row[UNION + 5] = -np.inf
+        # intersection of the wedges (a subset; used only when sure)
+        _wedge_planes(right_hi_x, right_hi_y, 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
+        _wedge_planes(left_lo_x, left_lo_y, -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+    return sure
+
+
+@numba.njit(cache=True)
+def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, reach_m, belt,
+                         half_aperture_rad, margin_m, guard_m, near_switch_m, arc_slack,
+                         angle_margin_rad, trig_limit_rad, inner, reject, certain):
+    """Per box and sensor verdicts of :func:`intervals.sonar.sensor_verdicts`, in place.
+
+    ``boxes (N, 3, 2)`` and ``cos_theta, sin_theta (N, 2)`` of their heading bounds (numpy's
+    ``cos`` and ``sin``, those of the reference); ``segments (m, 2, 2)``; ``ranges (k, 2)``
+    distance intervals m and ``kind (k,)`` int8 of the readings (:func:`intervals.sonar.reading_intervals`); ``reach_m``
+    (:attr:`intervals.sonar.SonarScan.reach_m`); ``belt (k, 8)``
+    (:attr:`intervals.sonar.SonarBelt.kernel_table`); the aperture, the sensor-box margin m and
+    the tolerances of :mod:`intervals.sonar`; ``inner``: compute ``certain``.
+    Writes ``reject (N, k)`` and ``certain (N, k)`` (bool, every element).
+    """
+    k = belt.shape[0]
+    rows = np.empty((k, SENSOR_COLUMNS))
+    hit = np.empty(k, dtype=np.bool_)  # some segment passes the hit test
+    fires = np.empty(k, dtype=np.bool_)  # the free-space test fires
+    close = np.empty(k, dtype=np.bool_)  # some segment may be closer than lo
+    sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
+    visible = reach_m + guard_m
+    for n in range(boxes.shape[0]):
+        sure = _sensor_rows(boxes[n], cos_theta[n], sin_theta[n], belt, half_aperture_rad,
+                            margin_m, guard_m, arc_slack, angle_margin_rad, trig_limit_rad, rows)
+        # the hull of the sensor boxes: only segments within reach of it take part
+        sx_lo, sx_hi = rows[0, CX] - rows[0, HX], rows[0, CX] + rows[0, HX]
+        sy_lo, sy_hi = rows[0, CY] - rows[0, HY], rows[0, CY] + rows[0, HY]
+        for i in range(1, k):
+            sx_lo = _min(sx_lo, rows[i, CX] - rows[i, HX])
+            sx_hi = _max(sx_hi, rows[i, CX] + rows[i, HX])
+            sy_lo = _min(sy_lo, rows[i, CY] - rows[i, HY])
+            sy_hi = _max(sy_hi, rows[i, CY] + rows[i, HY])
+        hull_cx, hull_cy = (sx_lo + sx_hi) / 2, (sy_lo + sy_hi) / 2
+        hull_hx, hull_hy = (sx_hi - sx_lo) / 2, (sy_hi - sy_lo) / 2
+        hit[:] = False
+        fires[:] = False
+        close[:] = False
+        sure_hit[:] = False
+        for j in range(segments.shape[0]):
+            ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+            ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
+            gap = _segment_box_gap(ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy,
+                                   near_switch_m)
+            if not gap <= visible:
+                continue
+            for i in range(k):
+                if kind[i] == IGNORED:
+                    continue
+                # the part [t0, t1] of the segment in S + W(Phi)
+                t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
+                if not t0 <= t1:
+                    continue
+                cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
+                lo, hi = ranges[i, 0], ranges[i, 1]
+                # hit test: distance bounds between that part and the sensor box
+                p0x, p0y = ax + t0 * ex, ay + t0 * ey
+                dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
+                dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy,
+                                           near_switch_m) - guard_m
+                dist_ub = _max(_point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+                               _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy)) + guard_m
+                if dist_lb <= hi and dist_ub >= lo:
+                    hit[i] = True
+                if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
+                    close[i] = True  # some pose may see this segment closer than lo
+                # free-space test: segment points in the cone for every pose of the box
+                if sure:
+                    u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
+                    if u0 <= u1:
+                        far_bound = _nearest_distance(
+                            cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
+                        )[2] + math.hypot(hx, hy) + guard_m
+                        if far_bound < lo:
+                            fires[i] = True
+                        if far_bound <= hi:
+                            sure_hit[i] = True
+        for i in range(k):
+            echo, free = kind[i] == ECHO, kind[i] == FREE
+            impossible = echo and ranges[i, 0] > ranges[i, 1]
+            reject[n, i] = (echo and (not hit[i] or impossible)) or ((echo or free) and fires[i])
+            certain[n, i] = inner and (
+                (echo and not close[i] and sure_hit[i] and not impossible)
+                or (free and not close[i])
+                or kind[i] == IGNORED
+            )
+
+
+@numba.njit(cache=True)
+def room_verdicts_into(boxes, boundary, guard_m, near_switch_m, outside, inside):
+    """The in-room test of :mod:`intervals.sonar` (as ``intervals.sonar._room_verdict``), in
+    place: ``outside (N,)`` / ``inside (N,)`` bool, the (x, y) rectangle of box ``n`` lies
+    entirely outside / inside the polygon ``boundary (p, 2)`` m: no edge comes within
+    ``guard_m`` of it, and the ray cast from its centre towards +x crosses the boundary an even
+    / odd number of times."""
+    p = boundary.shape[0]
+    for n in range(boxes.shape[0]):
+        cx, cy = (boxes[n, 0, 0] + boxes[n, 0, 1]) / 2.0, (boxes[n, 1, 0] + boxes[n, 1, 1]) / 2.0
+        hx, hy = (boxes[n, 0, 1] - boxes[n, 0, 0]) / 2.0, (boxes[n, 1, 1] - boxes[n, 1, 0]) / 2.0
+        clear, crossings = True, 0
+        for i in range(p):
+            ax, ay = boundary[i, 0], boundary[i, 1]
+            nxt = i + 1 if i + 1 < p else 0
+            ex, ey = boundary[nxt, 0] - ax, boundary[nxt, 1] - ay
+            if not _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m) > guard_m:
+                clear = False
+                break
+            if (ay > cy) != (ay + ey > cy) and ax + (cy - ay) * ex / ey > cx:
+                crossings += 1
+        outside[n] = clear and crossings % 2 == 0
+        inside[n] = clear and crossings % 2 == 1

@@ -1,0 +1,72 @@
+"""The compiled scalar kernels against numpy and the numpy wrapping functions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from localization import linalg
+from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle, wrap_residual
+
+
+@pytest.mark.parametrize("n", [1, 3, 5, 8])
+def test_cholesky_and_solve_match_numpy(n):
+    rng = np.random.default_rng(n)
+    for _ in range(50):
+        root = rng.normal(size=(n, n))
+        matrix = root @ root.T + 1e-3 * np.eye(n)
+        factor = np.full((n, n), np.nan)  # the kernel must overwrite every entry, upper part included
+        assert cholesky_lower(matrix, factor)
+        np.testing.assert_allclose(factor, np.linalg.cholesky(matrix), rtol=1e-10, atol=1e-12)
+        rhs = rng.normal(size=(n, 3))
+        out = np.empty_like(rhs)
+        cholesky_solve(factor, rhs, out)
+        np.testing.assert_allclose(matrix @ out, rhs, rtol=1e-8, atol=1e-8)
+        cholesky_solve(factor, rhs, rhs)  # in place gives the same numbers
+        np.testing.assert_array_equal(rhs, out)
+
+
+def test_cholesky_reads_the_lower_triangle_only():
+    matrix = np.array([[4.0, 99.0], [2.0, 3.0]])  # the upper entry is garbage
+    factor = np.empty((2, 2))
+    assert cholesky_lower(matrix, factor)
+    np.testing.assert_allclose(factor, np.linalg.cholesky(np.array([[4.0, 2.0], [2.0, 3.0]])))
+
+
+@pytest.mark.parametrize(
+    "matrix",
+    [
+        np.array([[1.0, 2.0], [2.0, 1.0]]),  # indefinite
+        np.array([[1.0, 1.0], [1.0, 1.0]]),  # singular: the second pivot is exactly 0
+        np.array([[-1.0, 0.0], [0.0, 1.0]]),
+        np.array([[np.nan, 0.0], [0.0, 1.0]]),
+        np.array([[np.inf, 0.0], [0.0, 1.0]]),
+    ],
+)
+def test_cholesky_refuses_what_lapack_refuses(matrix):
+    assert not cholesky_lower(matrix, np.empty((2, 2)))
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(np.where(np.isfinite(matrix), matrix, -1.0))
+
+
+def test_wrapping_matches_the_numpy_functions():
+    rng = np.random.default_rng(1)
+    angles = np.concatenate([
+        rng.uniform(-50.0, 50.0, 2000),
+        [-math.pi, math.pi, np.nextafter(-math.pi, -4.0), np.nextafter(math.pi, 4.0), 0.0, 3 * math.pi, -3 * math.pi],
+    ])
+    wrapped = np.array([wrap_angle(a) for a in angles])
+    np.testing.assert_array_equal(wrapped, linalg.wrap_angle(angles))
+    assert wrapped.min() >= -math.pi and wrapped.max() < math.pi
+    residuals = np.array([wrap_residual(a) for a in angles])
+    np.testing.assert_array_equal(residuals, linalg.wrap_residual(angles))
+
+
+def test_all_finite():
+    values = np.zeros((3, 4))
+    assert all_finite(values)
+    for bad in (np.nan, np.inf, -np.inf):
+        values[2, 1] = bad
+        assert not all_finite(values)
