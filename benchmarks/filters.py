@@ -16,7 +16,10 @@ wrapped offsets about the centre sigma point (the definition ours uses) and a ``
 that wraps it; filterpy's EKF runs the nonlinear transition through ``predict_x`` (its
 documented extension point) with ``F`` set to the CTRV Jacobian before each predict.
 
-Order of work: (1) every filter of ours must give filterpy's estimates (means and
+Our UKF is timed on both of its paths, side by side: ``ukf`` is the compiled path (the models
+built with their per-point kernels, ``CTRV.process_model(Q)`` and ``pose_model(R)``, see
+``localization.compiled_ukf``), ``ukf numpy`` the numpy path (the same functions without
+kernels). Order of work: (1) every filter of ours must give filterpy's estimates (means and
 covariances, every step of ``--filterpy-runs`` runs, tolerance :data:`TOLERANCE`), and our
 batched filter the runs' own one-run estimates; the script exits 1 otherwise. (2) Timing, best
 of ``--repeats``: one filter, microseconds per step (predict + update) and the ratio filterpy /
@@ -48,7 +51,7 @@ from localization.ekf import ExtendedKalmanFilter
 from localization.gaussian import Gaussian
 from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
-from localization.motion_models import ctrv_jacobian, ctrv_transition
+from localization.motion_models import CTRV, ctrv_jacobian, ctrv_transition, pose_model
 from localization.sigma_points import ScaledSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
 
@@ -108,20 +111,24 @@ def simulate(runs: int, steps: int, rng: np.random.Generator) -> tuple[np.ndarra
 # ----------------------------------------------------------------------------------- ours
 
 
-def our_models() -> tuple[ProcessModel, MeasurementModel]:
-    """The CTRV process model (with Jacobian) and the pose measurement model, heading an angle."""
+def our_models(compiled: bool = False) -> tuple[ProcessModel, MeasurementModel]:
+    """The CTRV process model (with Jacobian) and the pose measurement model, heading an angle;
+    ``compiled``: the same models with their per-point kernels (the UKF's compiled path)."""
+    if compiled:
+        return CTRV.process_model(Q), pose_model(R)
     return (
         ProcessModel(ctrv_transition, Q, jacobian=ctrv_jacobian),
         MeasurementModel(measure_pose, R, jacobian=measure_pose_jacobian, angle_indices=(HEADING,)),
     )
 
 
-def run_ours(filt, z: np.ndarray, initial: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Run ``filt`` over ``z (..., steps, 3)`` from ``initial (..., 5)`` (one run or a batch).
+def run_ours(filt, z: np.ndarray, initial: np.ndarray, compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Run ``filt`` over ``z (..., steps, 3)`` from ``initial (..., 5)`` (one run or a batch),
+    with the models of :func:`our_models`.
 
     Returns means ``(..., steps, 5)`` and covariances ``(..., steps, 5, 5)`` after each update.
     """
-    process, measurement = our_models()
+    process, measurement = our_models(compiled)
     batch = initial.shape[:-1]
     belief = Gaussian(initial, np.broadcast_to(P0, batch + (5, 5)), angle_indices=(HEADING,))
     steps = z.shape[-2]
@@ -213,25 +220,33 @@ def _difference(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarra
     return float(max(np.abs(dm).max(), np.abs(a[1] - b[1]).max()))
 
 
+LABELS = {"ukf": "UKF (compiled path)", "ukf numpy": "UKF (numpy path)", "ekf": "EKF"}
+
+
+def ours() -> dict[str, tuple[object, bool, str]]:
+    """Our filters by name: ``(filter, compiled models, filterpy's filter to compare with)``."""
+    ukf = UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA))
+    return {"ukf": (ukf, True, "ukf"), "ukf numpy": (ukf, False, "ukf"), "ekf": (ExtendedKalmanFilter(), False, "ekf")}
+
+
 def check_equivalence(z: np.ndarray, initial: np.ndarray, runs: int) -> list[list[str]]:
     """Rows ``[check, largest difference, verdict]``; the caller fails on any ``FAIL``."""
-    filters = {"ukf": UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA)), "ekf": ExtendedKalmanFilter()}
+    filters = ours()
     rows = []
-    for kind, filt in filters.items():
-        batched = run_ours(filt, z[:runs], initial[:runs])
+    for name, (filt, compiled, theirs) in filters.items():
+        batched = run_ours(filt, z[:runs], initial[:runs], compiled)
         vs_filterpy = vs_single = 0.0
         for r in range(runs):
-            single = run_ours(filt, z[r], initial[r])
-            vs_filterpy = max(vs_filterpy, _difference(single, run_filterpy(kind, z[r], initial[r])))
+            single = run_ours(filt, z[r], initial[r], compiled)
+            vs_filterpy = max(vs_filterpy, _difference(single, run_filterpy(theirs, z[r], initial[r])))
             vs_single = max(vs_single, _difference(single, (batched[0][r], batched[1][r])))
-        name = kind.upper()
-        rows.append([f"our {name} vs filterpy {name} ({runs} runs x {z.shape[1]} steps)", f"{vs_filterpy:.1e}",
-                     "ok" if vs_filterpy <= TOLERANCE else "FAIL"])
-        rows.append([f"our {name}: batch of {runs} vs one run at a time", f"{vs_single:.1e}",
+        rows.append([f"our {LABELS[name]} vs filterpy {theirs.upper()} ({runs} runs x {z.shape[1]} steps)",
+                     f"{vs_filterpy:.1e}", "ok" if vs_filterpy <= TOLERANCE else "FAIL"])
+        rows.append([f"our {LABELS[name]}: batch of {runs} vs one run at a time", f"{vs_single:.1e}",
                      "ok" if vs_single <= TOLERANCE else "FAIL"])
-    floor = max(_difference(run_ours(filters["ukf"], z[r], initial[r]), floor_ukf_run(z[r], initial[r]))
+    floor = max(_difference(run_ours(filters["ukf numpy"][0], z[r], initial[r]), floor_ukf_run(z[r], initial[r]))
                 for r in range(runs))
-    rows.append(["our UKF vs its bare-numpy floor (`floor_ukf_run`)", f"{floor:.1e}",
+    rows.append(["our UKF (numpy path) vs its bare-numpy floor (`floor_ukf_run`)", f"{floor:.1e}",
                  "ok" if floor <= TOLERANCE else "FAIL"])
     return rows
 
@@ -242,13 +257,13 @@ def check_equivalence(z: np.ndarray, initial: np.ndarray, runs: int) -> list[lis
 def time_all(z: np.ndarray, initial: np.ndarray, filterpy_runs: int, repeats: int) -> dict[str, float]:
     """Microseconds per step (one filter) and per run-step (batched / looped), best of ``repeats``."""
     steps = z.shape[1]
-    ours = {"ukf": UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA)), "ekf": ExtendedKalmanFilter()}
+    one, all_runs = steps * 1e-6, steps * z.shape[0] * 1e-6  # seconds -> us per (run-)step
     us = {}
-    for kind, filt in ours.items():
-        one, all_runs = steps * 1e-6, steps * z.shape[0] * 1e-6  # seconds -> us per (run-)step
-        us[f"ours {kind} single"] = best_seconds(lambda: run_ours(filt, z[0], initial[0]), repeats) / one
+    for name, (filt, compiled, _) in ours().items():
+        us[f"ours {name} single"] = best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled), repeats) / one
+        us[f"ours {name} batched"] = best_seconds(lambda: run_ours(filt, z, initial, compiled), repeats) / all_runs
+    for kind in ("ukf", "ekf"):
         us[f"filterpy {kind} single"] = best_seconds(lambda: run_filterpy(kind, z[0], initial[0]), repeats) / one
-        us[f"ours {kind} batched"] = best_seconds(lambda: run_ours(filt, z, initial), repeats) / all_runs
 
         def looped():
             for r in range(filterpy_runs):
@@ -336,6 +351,7 @@ def decompose_ukf_step(z: np.ndarray, initial: np.ndarray, repeats: int) -> list
 
     points = np.tile(initial[0], (11, 1))
     full = best_seconds(lambda: run_ours(filt, z[0], initial[0]), repeats) / steps * 1e6
+    compiled = best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled=True), repeats) / steps * 1e6
     filter_only = best_seconds(free_run, repeats) / steps * 1e6
     floor = best_seconds(lambda: floor_ukf_run(z[0], initial[0]), repeats) / steps * 1e6
     ctrv_11 = us(lambda: ctrv_transition(points, DT_S), 200)
@@ -343,7 +359,8 @@ def decompose_ukf_step(z: np.ndarray, initial: np.ndarray, repeats: int) -> list
     jacobian_1 = us(lambda: ctrv_jacobian(initial[0], DT_S), 200)
     add = us(lambda: P0 + P0, 5000)
     return [
-        ["our UKF step (predict + update), CTRV", f"{full:.0f}"],
+        ["our UKF step (predict + update), CTRV, compiled path", f"{compiled:.1f}"],
+        ["our UKF step (predict + update), CTRV, numpy path", f"{full:.0f}"],
         ["the same step with a free model (the filter's own share)", f"{filter_only:.0f}"],
         ["CTRV transition of the 11 sigma points, one call (the model's share)", f"{ctrv_11:.0f}"],
         ["the same step as bare numpy/LAPACK calls (`floor_ukf_run`: the floor of numpy)", f"{floor:.0f}"],
@@ -376,10 +393,11 @@ def main(argv: list[str] | None = None) -> int:
 
     us = time_all(z, initial, args.filterpy_runs, args.repeats)
     rows = []
-    for kind, target_single, target_batch in (("ukf", 8.0, 50.0), ("ekf", None, None)):
-        name = kind.upper()
-        single, theirs = us[f"ours {kind} single"], us[f"filterpy {kind} single"]
-        batched, looped = us[f"ours {kind} batched"], us[f"filterpy {kind} looped"]
+    for kind, target_single, target_batch in (("ukf", 8.0, 50.0), ("ukf numpy", None, None), ("ekf", None, None)):
+        name = LABELS[kind]
+        theirs_kind = ours()[kind][2]
+        single, theirs = us[f"ours {kind} single"], us[f"filterpy {theirs_kind} single"]
+        batched, looped = us[f"ours {kind} batched"], us[f"filterpy {theirs_kind} looped"]
         for label, mine, ref, target in (
             (f"{name}, one filter (us per step)", single, theirs, target_single),
             (f"{name}, {args.runs} runs batched vs filterpy looped (us per run-step)", batched, looped, target_batch),
@@ -419,31 +437,25 @@ def main(argv: list[str] | None = None) -> int:
 
 
 ANALYSIS = """\
-Findings (the decomposition above; ``--profile`` gives the cProfile of our step):
+Findings (the decomposition above; ``--profile`` gives the cProfile of our numpy step):
 
-- Batched (1000 runs): target met with a wide margin: one numpy pass per step serves all runs,
-  so the per-call cost is shared; filterpy has no batch mode and is looped over runs.
-- One filter: target MISSED (about 4.5x against 8x). filterpy's step is about 500 us, of which
-  about 105 us are its 11 calls of ``ctrv_transition`` on one state each (we hand it our model;
-  it evaluates sigma points one by one) and most of the rest its Python loops over sigma points
-  (residual and mean functions, outer products). Ours is about 100 us: the filter's own share is
-  about 80 us (with a free model), the CTRV model on the 11 points 13 us. The cause of the miss
-  is numpy's per-call cost on 5x5 arrays (0.5 us for the cheapest ufunc, 1-1.5 us for a matmul or
-  a LAPACK call through scipy): ``floor_ukf_run``, the same step as the fewest bare numpy/LAPACK
-  calls we could write (no checks, no belief objects, LAPACK direct; same estimates), still takes
-  about 70 us, i.e. at most about 7x filterpy. So 8x is out of reach of a numpy implementation
-  of this step on this machine, as far as we could write one; trimming our one-run path toward the floor (engineer C is
-  doing it: LAPACK ``potrf`` directly, fewer validations) can bring about 6-7x.
-- Fix we recommend for the 8x target: compile the one-run step (predict + update fused, 5
-  states) with numba (not installed; a new dependency for the lead to decide) or write it in C
-  through a small extension; a compiled 5-state UKF step costs a few microseconds plus the model.
-  Short of that, declare the one-filter target as about 6x for numpy, and point users who need
-  speed to the batched API.
-- EKF (no target): ours is slightly slower than filterpy's on one filter. Both pay the same
-  model (``ctrv_jacobian`` + ``ctrv_transition`` on one state, about 50 us); ours adds about 25 us
-  more glue: the Joseph form built with ``np.eye`` and five matmuls, ``np.linalg.solve`` (5-6 us
-  through its Python wrapper, against 1.3 us for LAPACK ``posv`` directly), and the finiteness
-  checks of every step. Batched, the EKF reaches about 35-50x filterpy looped.
+- One filter: target met by the compiled path (``localization.compiled_ukf``): the whole
+  predict (or update) is one call of a compiled entry that loops over the sigma points in
+  scalar code, so a step pays two calls' overhead instead of some 75 numpy calls. What remains
+  of its time is mostly the Python glue of the two calls (argument checks, the belief objects),
+  not arithmetic. The numpy path (the reference, used when a model has no per-point kernel)
+  stays at about 4.5x: numpy's per-call cost on 5x5 arrays bounds it; ``floor_ukf_run``, the
+  same step as the fewest bare numpy/LAPACK calls we could write, still takes about 70 us.
+- Batched (1000 runs): both paths meet the target; filterpy has no batch mode and is looped
+  over runs. The compiled batch needs no slicing and allocates nothing per run.
+- filterpy's step is about 500 us, of which about 105 us are its 11 calls of
+  ``ctrv_transition`` on one state each (it evaluates sigma points one by one) and most of the
+  rest its Python loops over sigma points (residual and mean functions, outer products).
+- EKF (no target, numpy only): ours is slightly slower than filterpy's on one filter. Both pay
+  the same model (``ctrv_jacobian`` + ``ctrv_transition`` on one state, about 50 us); ours adds
+  about 25 us more glue: the Joseph form built with ``np.eye`` and five matmuls,
+  ``np.linalg.solve`` and the finiteness checks of every step. Batched, the EKF reaches about
+  35-50x filterpy looped.
 """
 
 

@@ -13,6 +13,18 @@ through unchanged by the EKF family. The unscented filters evaluate the models o
 points ``(B, 2n + 1, n)``: an array argument whose leading axes equal the belief's batch
 shape ``(B,)`` is per-run and gets a sigma axis after them (``(B,)`` -> ``(B, 1)``,
 ``(B, k)`` -> ``(B, 1, k)``); floats and other arrays pass unchanged (they are shared).
+
+A model may also carry a per-point kernel (``point=``): the same function for ONE sigma point,
+compiled with ``numba.njit``, which lets the UKF take its compiled path
+(:mod:`localization.compiled_ukf`, about 30 times faster for one filter):
+
+- ``f(x (n,), args (k,), out (n,))`` (additive) or ``f(x (n,), w (q,), args (k,), out (n,))``
+  (augmented), ``h(x (n,), args (k,), out (m,))``: the result is written into ``out``;
+  ``args`` are the step's arguments packed as floats, each flattened, in order (per-run
+  arrays give their run's entries); ``x`` and ``w`` are scratch copies the kernel may overwrite.
+
+The kernel must compute the batched function to rounding: the numpy path (the reference, and
+the fallback whenever a compiled step cannot run or fails) uses the batched one.
 """
 
 from __future__ import annotations
@@ -21,10 +33,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
+import numba
 import numpy as np
 
 from localization.errors import EstimationError
 from localization.linalg import symmetrise, wrap_columns
+
+
+def _check_kernel(owner: str, point) -> None:
+    """Refuse a ``point`` kernel that is not a numba-compiled function (or ``None``)."""
+    if point is not None and not isinstance(point, numba.core.registry.CPUDispatcher):
+        raise EstimationError(f"{owner}: point must be a numba.njit-compiled function or None, got {point!r}")
 
 
 def _noise_covariance(matrix: np.ndarray, owner: str, name: str) -> np.ndarray:
@@ -54,12 +73,15 @@ class ProcessModel:
             state augmented with ``w``, paper 001 section III-C-2).
         noise_sqrt: computed, ``(..., q, q)`` a square root ``S S^T = Q`` (from the
             eigen-decomposition, so a singular ``Q`` is fine) for the augmented sigma points.
+        point: optional per-point kernel computing ``f`` for one sigma point (module
+            docstring); the UKF's compiled path.
     """
 
     f: Callable[..., np.ndarray]
     Q: np.ndarray
     jacobian: Callable[..., np.ndarray] | None = None
     noise: Literal["additive", "augmented"] = "additive"
+    point: Callable[..., None] | None = None
     noise_sqrt: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -69,6 +91,7 @@ class ProcessModel:
             raise EstimationError("ProcessModel: jacobian must be callable or None")
         if self.noise not in ("additive", "augmented"):
             raise EstimationError(f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}")
+        _check_kernel("ProcessModel", self.point)
         q_cov = _noise_covariance(self.Q, "ProcessModel", "Q")
         eigenvalues, eigenvectors = np.linalg.eigh(q_cov)
         noise_sqrt = eigenvectors * np.sqrt(np.maximum(eigenvalues, 0.0))[..., None, :]
@@ -86,16 +109,20 @@ class MeasurementModel:
         R: ``(m, m)`` (or per-run ``(B, m, m)``) noise covariance, symmetric PSD.
         jacobian: ``H(x, *args) -> (..., m, n)``, needed by the EKF family and the IUKF.
         angle_indices: the measurement components that are angles (residuals wrapped).
+        point: optional per-point kernel computing ``h`` for one sigma point (module
+            docstring); the UKF's compiled path.
     """
 
     h: Callable[..., np.ndarray]
     R: np.ndarray
     jacobian: Callable[..., np.ndarray] | None = None
     angle_indices: tuple[int, ...] = ()
+    point: Callable[..., None] | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.h):
             raise EstimationError("MeasurementModel: h must be callable")
+        _check_kernel("MeasurementModel", self.point)
         if self.jacobian is not None and not callable(self.jacobian):
             raise EstimationError("MeasurementModel: jacobian must be callable or None")
         R = _noise_covariance(self.R, "MeasurementModel", "R")

@@ -56,6 +56,12 @@ filter rate. ``MotionModel.transition_with_noise`` applies an increment ``e`` as
 ramp over the step: the state is propagated with the quantity at its mid-step value
 ``q + e/2`` and ends at ``q + e`` (exact for CV and for the speed rows, second order
 otherwise). This is the noise augmentation of the UKF (state augmented by ``e``).
+
+Per-point kernels (numba, for the compiled UKF of :mod:`localization.compiled_ukf`): each
+transition also exists as ``*_point(x (n,), args (1,) = (dt_s,), out (n,))`` and, noise
+augmented, ``*_noisy_point(x, e (2,), args, out)``, written with the same formulas in the same
+order as the batched version (equal to rounding; tested). :meth:`MotionModel.process_model`,
+:func:`gps_model` and :func:`pose_model` build models that carry them.
 """
 
 from __future__ import annotations
@@ -64,10 +70,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from localization.compiled_linalg import wrap_angle as wrap_angle_scalar
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
+from localization.models import MeasurementModel, ProcessModel
 
 #: Below this ``|u|`` the moments ``M_1^s`` and ``M_2^s`` use their Taylor series (their
 #: closed forms cancel to ``u^2``); above it the closed forms lose at most 1e-13 relative.
@@ -352,12 +361,28 @@ def gps_position(x: Array) -> Array:
     return np.asarray(x, dtype=float)[..., :2]
 
 
+def _leading_jacobian(x: Array, m: int) -> Array:
+    """Jacobian ``(..., m, n)`` of ``x[..., :m]``."""
+    x = np.asarray(x, dtype=float)
+    jac = np.zeros(x.shape[:-1] + (m, x.shape[-1]))
+    for j in range(m):
+        jac[..., j, j] = 1.0
+    return jac
+
+
 def gps_jacobian(x: Array) -> Array:
     """Jacobian ``(..., 2, n)`` of :func:`gps_position`."""
-    x = np.asarray(x, dtype=float)
-    jac = np.zeros(x.shape[:-1] + (2, x.shape[-1]))
-    jac[..., 0, 0] = jac[..., 1, 1] = 1.0
-    return jac
+    return _leading_jacobian(x, 2)
+
+
+def pose_measurement(x: Array) -> Array:
+    """Pose measurement ``(..., 3) = (x_m, y_m, theta_rad)`` of the CTRV, CTRA and CCA layouts."""
+    return np.asarray(x, dtype=float)[..., :3]
+
+
+def pose_jacobian(x: Array) -> Array:
+    """Jacobian ``(..., 3, n)`` of :func:`pose_measurement`."""
+    return _leading_jacobian(x, 3)
 
 
 def cv_odometry(x: Array) -> Array:
@@ -414,6 +439,141 @@ def cca_odometry_jacobian(x: Array) -> Array:
     return jac
 
 
+# ------------------------------------------------------------------ per-point kernels (numba)
+# One sigma point per call, for localization.compiled_ukf: the formulas of the batched
+# functions above, in the same order of operations.
+
+
+@numba.njit(cache=True)
+def _along_arc_point(x, theta, length, turn, out) -> None:
+    """:func:`_along_arc` for one state ``x (n,)`` into ``out (n,)``."""
+    out[:] = x
+    half = 0.5 * turn
+    a = math.hypot(half, 1e-300)
+    chord = math.sin(a) / a * length
+    direction = theta + half
+    out[0] = x[0] + chord * math.cos(direction)
+    out[1] = x[1] + chord * math.sin(direction)
+    out[2] = wrap_angle_scalar(theta + turn)
+
+
+@numba.njit(cache=True)
+def cv_point(x, args, out) -> None:
+    """:func:`cv_transition` of one state ``x (4,)``, ``args = (dt_s,)``, into ``out (4,)``."""
+    dt = args[0]
+    out[:] = x
+    out[0] = x[0] + x[2] * dt
+    out[1] = x[1] + x[3] * dt
+
+
+@numba.njit(cache=True)
+def ctrv_point(x, args, out) -> None:
+    """:func:`ctrv_transition` of one state ``x (5,)``, ``args = (dt_s,)``, into ``out (5,)``."""
+    dt = args[0]
+    _along_arc_point(x, x[2], x[3] * dt, x[4] * dt, out)
+
+
+@numba.njit(cache=True)
+def ctra_point(x, args, out) -> None:
+    """:func:`ctra_transition` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6,)``
+    (the moments of :func:`trig_moments` to order 1 for one turned angle ``u``)."""
+    dt = args[0]
+    theta, v, accel, omega = x[2], x[3], x[4], x[5]
+    u = omega * dt
+    u_nz = 1e-300 if u == 0.0 else u
+    half = 0.5 * u_nz
+    sin_h = math.sin(half)
+    sinc_u = math.sin(u_nz) / u_nz
+    sinc_h = sin_h / half
+    u2 = u * u
+    if abs(u) < _SERIES_BELOW:
+        m1s_over_u = _M1S_OVER_U[4]
+        for k in range(3, -1, -1):
+            m1s_over_u = m1s_over_u * u2 + _M1S_OVER_U[k]
+    else:
+        m1s_over_u = (sinc_u - math.cos(u)) / u2
+    mc1 = sinc_u - 0.5 * sinc_h * sinc_h
+    ms1 = u * m1s_over_u
+    forward = v * dt * sinc_u + accel * (dt * dt) * mc1
+    left = v * dt * (sin_h * sinc_h) + accel * (dt * dt) * ms1
+    c, s = math.cos(theta), math.sin(theta)
+    out[:] = x
+    out[0] = x[0] + (c * forward - s * left)
+    out[1] = x[1] + (s * forward + c * left)
+    out[2] = wrap_angle_scalar(theta + u)
+    out[3] = v + accel * dt
+
+
+@numba.njit(cache=True)
+def cca_point(x, args, out) -> None:
+    """:func:`cca_transition` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6,)``."""
+    dt = args[0]
+    v, a, c = x[3], x[4], x[5]
+    s = v * dt + 0.5 * a * (dt * dt)
+    _along_arc_point(x, x[2], s, c * s, out)
+    out[3] = v + a * dt
+
+
+@numba.njit(cache=True)
+def _half_increment(values, noise, first) -> None:
+    """``values[first + j] += noise[j] / 2``: half of the ramp of
+    :meth:`MotionModel.transition_with_noise` (applied to the state before the transition, at
+    mid-step, and to its image after it)."""
+    for j in range(noise.shape[0]):
+        values[first + j] += 0.5 * noise[j]
+
+
+@numba.njit(cache=True)
+def cv_noisy_point(x, noise, args, out) -> None:
+    """CV with the increments ``noise (2,)`` of ``(vx, vy)`` (augmented noise); ``x`` overwritten."""
+    _half_increment(x, noise, 2)
+    cv_point(x, args, out)
+    _half_increment(out, noise, 2)
+
+
+@numba.njit(cache=True)
+def ctrv_noisy_point(x, noise, args, out) -> None:
+    """CTRV with the increments ``noise (2,)`` of ``(v, omega)`` (augmented noise); ``x`` overwritten."""
+    _half_increment(x, noise, 3)
+    ctrv_point(x, args, out)
+    _half_increment(out, noise, 3)
+
+
+@numba.njit(cache=True)
+def ctra_noisy_point(x, noise, args, out) -> None:
+    """CTRA with the increments ``noise (2,)`` of ``(a, omega)`` (augmented noise); ``x`` overwritten."""
+    _half_increment(x, noise, 4)
+    ctra_point(x, args, out)
+    _half_increment(out, noise, 4)
+
+
+@numba.njit(cache=True)
+def cca_noisy_point(x, noise, args, out) -> None:
+    """CCA with the increments ``noise (2,)`` of ``(a, c)`` (augmented noise); ``x`` overwritten."""
+    _half_increment(x, noise, 4)
+    cca_point(x, args, out)
+    _half_increment(out, noise, 4)
+
+
+@numba.njit(cache=True)
+def leading_entries_point(x, args, out) -> None:
+    """``out (m,) = x[:m]``: :func:`gps_position` (``m = 2``) or :func:`pose_measurement` (``m = 3``)."""
+    for j in range(out.shape[0]):
+        out[j] = x[j]
+
+
+def gps_model(R: Array) -> MeasurementModel:
+    """The GPS position model ``(x_m, y_m)`` with noise ``R (2, 2)`` (m^2), with its kernel."""
+    return MeasurementModel(gps_position, R, jacobian=gps_jacobian, point=leading_entries_point)
+
+
+def pose_model(R: Array) -> MeasurementModel:
+    """The pose model ``(x_m, y_m, theta_rad)`` (CTRV, CTRA, CCA; heading an angle) with noise
+    ``R (3, 3)`` (m^2, m^2, rad^2), with its kernel."""
+    return MeasurementModel(pose_measurement, R, jacobian=pose_jacobian, angle_indices=(2,),
+                            point=leading_entries_point)
+
+
 # ----------------------------------------------------------------------------- the records
 
 
@@ -433,6 +593,8 @@ class MotionModel:
         noise_names: the process-noise variables of paper 001 table I.
         noise_indices: the state entries each noise variable drives (consecutive, increasing).
         noise_intensity: table I standard deviations, read as intensities per sqrt(second).
+        point: the per-point kernel of ``transition`` (compiled UKF, additive noise).
+        noisy_point: the per-point kernel of ``transition_with_noise`` (augmented noise).
     """
 
     name: str
@@ -446,6 +608,8 @@ class MotionModel:
     noise_names: tuple[str, ...]
     noise_indices: tuple[int, ...]
     noise_intensity: tuple[float, ...]
+    point: Callable[..., None]
+    noisy_point: Callable[..., None]
 
     def __post_init__(self) -> None:
         q = len(self.noise_names)
@@ -481,6 +645,18 @@ class MotionModel:
         out[..., driven] += half
         return out
 
+    def process_model(self, Q: Array, noise: str = "additive") -> ProcessModel:
+        """This model as a :class:`~localization.models.ProcessModel` with its kernel.
+
+        ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;
+        ``noise="augmented"``: ``f = transition_with_noise`` with ``Q (2, 2)`` the covariance of
+        the increments (e.g. ``np.diag(self.process_noise_std(dt_s) ** 2)``). Either way the
+        UKF takes its compiled path (the step's argument is ``dt_s``).
+        """
+        if noise == "augmented":
+            return ProcessModel(self.transition_with_noise, Q, noise="augmented", point=self.noisy_point)
+        return ProcessModel(self.transition, Q, jacobian=self.jacobian, noise=noise, point=self.point)
+
 
 CV = MotionModel(
     name="CV",
@@ -493,6 +669,8 @@ CV = MotionModel(
     odometry_names=("speed",),
     noise_names=("e_vx", "e_vy"),
     noise_indices=(2, 3),
+    point=cv_point,
+    noisy_point=cv_noisy_point,
     noise_intensity=(0.5, 0.5),
 )
 CTRV = MotionModel(
@@ -506,6 +684,8 @@ CTRV = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_v", "e_omega"),
     noise_indices=(3, 4),
+    point=ctrv_point,
+    noisy_point=ctrv_noisy_point,
     noise_intensity=(0.5, 0.25),
 )
 CTRA = MotionModel(
@@ -519,6 +699,8 @@ CTRA = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_a", "e_omega"),
     noise_indices=(4, 5),
+    point=ctra_point,
+    noisy_point=ctra_noisy_point,
     noise_intensity=(0.5, 0.25),
 )
 CCA = MotionModel(
@@ -532,6 +714,8 @@ CCA = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_a", "e_c"),
     noise_indices=(4, 5),
+    point=cca_point,
+    noisy_point=cca_noisy_point,
     noise_intensity=(0.5, 0.25),
 )
 

@@ -76,6 +76,14 @@ class SigmaWeights:
         weights.flags.writeable = False
         return weights
 
+    @cached_property
+    def packed(self) -> np.ndarray:
+        """``(3,)`` ``(gamma, Wi, c0)``, read-only: the weights as the compiled UKF takes them
+        (:mod:`localization.compiled_ukf`). Cached with the weights, so a step builds nothing."""
+        packed = np.array([self.gamma, self.wi, self.c0])
+        packed.flags.writeable = False
+        return packed
+
     @property
     def mean_weights(self) -> np.ndarray:
         """``(2n + 1,)`` weights of the mean (for reference and tests)."""

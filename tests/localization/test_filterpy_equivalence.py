@@ -16,7 +16,7 @@ from localization.ekf import ExtendedKalmanFilter
 from localization.gaussian import Gaussian
 from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
-from localization.motion_models import CTRV
+from localization.motion_models import CTRV, pose_model
 from localization.sigma_points import ScaledSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
 
@@ -60,9 +60,12 @@ def data():
     return start, np.array(zs)
 
 
-def _ours(filt, start, zs):
-    process = ProcessModel(CTRV.transition, Q, jacobian=CTRV.jacobian)
-    measurement = MeasurementModel(lambda x: x[..., :3], R, jacobian=lambda x: H, angle_indices=(2,))
+def _ours(filt, start, zs, compiled=False):
+    if compiled:  # the models with their kernels: the UKF's compiled path
+        process, measurement = CTRV.process_model(Q), pose_model(R)
+    else:
+        process = ProcessModel(CTRV.transition, Q, jacobian=CTRV.jacobian)
+        measurement = MeasurementModel(lambda x: x[..., :3], R, jacobian=lambda x: H, angle_indices=(2,))
     belief = Gaussian(start, P0, angle_indices=(2,))
     out = []
     for z in zs:
@@ -79,7 +82,8 @@ def _assert_same(ours, theirs):
         np.testing.assert_allclose(p, fp, rtol=0, atol=1e-10)
 
 
-def test_ukf_equals_filterpy_ukf(data):
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_ukf_equals_filterpy_ukf(data, compiled):
     start, zs = data
     ukf = filterpy_kalman.UnscentedKalmanFilter(
         dim_x=5, dim_z=3, dt=DT_S, hx=lambda x: x[:3], fx=CTRV.transition,
@@ -93,7 +97,8 @@ def test_ukf_equals_filterpy_ukf(data):
         ukf.predict()
         ukf.update(z)
         theirs.append((ukf.x.copy(), ukf.P.copy()))
-    _assert_same(_ours(UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.1, beta=2.0, kappa=0.0)), start, zs), theirs)
+    ours = _ours(UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.1, beta=2.0, kappa=0.0)), start, zs, compiled)
+    _assert_same(ours, theirs)
 
 
 def test_ekf_equals_filterpy_ekf(data):

@@ -1,0 +1,547 @@
+"""The compiled UKF step (numba): one call per predict or update, whatever the batch size.
+
+Why compiled. A numpy UKF step on 5 states is some 75 numpy calls on tiny arrays, each about
+1 us of call overhead: about 100 us for one filter, where the arithmetic needs a few hundred
+nanoseconds (``benchmarks/ukf_step.py``, ``benchmarks/filters.py``). Here a step is one call
+of a compiled entry that loops over the runs and the sigma points in scalar code and calls
+the model once per sigma point. :class:`~localization.ukf.UnscentedKalmanFilter` uses it
+whenever the model carries a per-point kernel (``point=`` of
+:class:`~localization.models.ProcessModel` and :class:`~localization.models.MeasurementModel`)
+and the step can be expressed here; otherwise, and whenever a step fails, it runs its numpy
+path, which stays the reference (same results to rounding, tested in
+``tests/localization/test_compiled_ukf.py``).
+
+The maths is the numpy UKF's, term by term (:mod:`localization.ukf`,
+:mod:`localization.sigma_points`). Prediction (paper 001 eq. 25-27)::
+
+    X_0 = x,  X_i = x + gamma L_i,  X_{n+i} = x - gamma L_i      (L L^T = P, i = 1..n)
+    Y_i = f(X_i),  D_i = Y_i - Y_0 (angles wrapped),  d = sum_{i>=1} W_i D_i
+    x- = Y_0 + d (angles wrapped),  P- = sum_{i>=1} W_i D_i D_i^T + (c0 - 1) d d^T + Q
+
+with ``W_i = 1 / (2 gamma^2)`` and ``c0 = Wc_0 - Wm_0``; the covariance is formed as
+``H + H^T`` of the half product ``H``, so it is exactly symmetric. With augmented noise
+(paper 001 section III-C-2) the sigma points are those of ``(x, w)`` with covariance
+``blockdiag(P, Q)`` (square root ``blockdiag(L, S)``, ``S S^T = Q``), the images
+``Y_i = f(X_i^x, X_i^w)`` and no ``+ Q``. Update (paper 001 eq. 29-35)::
+
+    Z_i = h(X_i),  z- = Z_0 + sum W_i (Z_i - Z_0),  S = (moments as above) + R
+    Pxz = W_i gamma L (Dz_{1..n} - Dz_{n+1..2n})                   (cross_covariance)
+    K^T = S^-1 Pxz^T (Cholesky solve),  x+ = x- + K (z - z-),  P+ = sym(P- - Pxz K^T)
+
+Per-point kernels. A model gives ``f(x (n,), args (k,), out (n,))`` (additive noise),
+``f(x (n,), w (q,), args (k,), out (n,))`` (augmented noise) or ``h(x (n,), args (k,), out (m,))``,
+compiled with ``numba.njit``, writing its result into ``out``; ``x`` and ``w`` are scratch
+copies of the sigma point (a kernel may overwrite them). ``args`` are the step's extra
+arguments packed as floats (:func:`pack_args`): each argument flattened, in order. The
+kernels of the motion models live beside their numpy versions in
+:mod:`localization.motion_models`.
+
+Entries. The generic cores (:func:`predict_core`, :func:`update_core`) take the kernel as an
+argument, so they are only called from other compiled functions: numba then inlines the
+kernel into a specialised copy. The entries Python calls are module-level and cached on disk
+(``cache=True``) for the built-in kernels (:data:`PREDICT_ENTRIES`, :data:`UPDATE_ENTRIES`; one
+prediction entry switches between the four motion models, so their first compilation, about
+10 s per noise kind, happens together);
+for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
+compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
+file only: after changing a kernel in :mod:`localization.motion_models`, delete the
+``compiled_ukf*.nbi/.nbc`` files in ``localization/__pycache__``.
+
+Status. An entry returns :data:`OK`, :data:`NOT_POSITIVE_DEFINITE` (a covariance to factorise,
+``P`` or ``S``) or :data:`NOT_FINITE` (an argument or a result). On anything but ``OK`` the
+caller discards the outputs and runs the numpy step, which applies the filter's
+:class:`~localization.linalg.PDPolicy` and raises the errors of the numpy path, word for word.
+
+Arrays: float64, C-contiguous; beliefs, noise covariances, weights and packed arguments
+read-only, measurements and outputs writable (a fixed set of types per entry, so each compiles once). Runs are
+independent and computed by the same code, so a batch gives its runs' one-by-one results bit
+for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle, wrap_residual
+from localization.errors import EstimationError
+from localization import motion_models as kernels
+
+OK = 0
+NOT_POSITIVE_DEFINITE = 1
+NOT_FINITE = 2
+
+
+# ------------------------------------------------------------------------------- the cores
+
+
+@numba.njit(cache=True)
+def _moments(dev, count, y0, weights, angles, noise_cov, out_mean, out_cov, shift) -> None:
+    """Mean and covariance of images about the centre one (:func:`localization.sigma_points.unscented_moments`).
+
+    ``dev (>= count, m)`` holds the wrapped deviations ``D_i`` in its first ``count`` rows,
+    ``y0 (m,)`` the centre image; ``weights = (gamma, W_i, c0)``; ``noise_cov (m, m)`` is added
+    (``Q`` or ``R``), or nothing when it has no rows. Writes ``out_mean (m,)`` (angles wrapped),
+    ``out_cov (m, m)`` and ``shift (m,) = d``.
+    """
+    m = y0.shape[0]
+    wi = weights[1]
+    half_wi = 0.5 * wi
+    half_c = 0.5 * (weights[2] - 1.0)
+    for j in range(m):  # d = sum W_i D_i
+        total = 0.0
+        for row in range(count):
+            total += wi * dev[row, j]
+        shift[j] = total
+        out_mean[j] = y0[j] + total
+    for a in angles:
+        out_mean[a] = wrap_angle(out_mean[a])
+    for j in range(m):  # H = [D; d]^T diag(W_i / 2, (c0 - 1) / 2) [D; d], stored in out_cov
+        for k in range(m):
+            total = 0.0
+            for row in range(count):
+                total += (half_wi * dev[row, j]) * dev[row, k]
+            out_cov[j, k] = total + (half_c * shift[j]) * shift[k]
+    added = noise_cov.shape[0] > 0
+    for j in range(m):  # H + H^T (+ noise)
+        for k in range(j + 1):
+            value = out_cov[j, k] + out_cov[k, j]
+            if added:
+                value = value + noise_cov[j, k]
+            out_cov[j, k] = value
+            out_cov[k, j] = value
+
+
+@numba.njit(cache=True)
+def _wrap_row(dev, row, angles) -> None:
+    for a in angles:
+        dev[row, a] = wrap_residual(dev[row, a])
+
+
+@numba.njit
+def _deviations(f, x, chol, gamma, step_args, angles, point, y0, dev) -> None:
+    """Images of the sigma points of ``x (n,)``, ``chol (n, n)`` through ``f(point, args, out)``:
+    ``y0`` the centre image, ``dev (2n, m)`` the deviations ``D_i = Y_i - Y_0`` (angles wrapped),
+    rows ``0..n-1`` for ``x + gamma L_i`` and ``n..2n-1`` for ``x - gamma L_i``."""
+    n = x.shape[0]
+    point[:] = x
+    f(point, step_args, y0)
+    for i in range(n):
+        for half in range(2):
+            row = i + half * n
+            for j in range(n):
+                spread = gamma * chol[j, i]
+                point[j] = x[j] + spread if half == 0 else x[j] - spread
+            f(point, step_args, dev[row])
+            for j in range(y0.shape[0]):
+                dev[row, j] -= y0[j]
+            _wrap_row(dev, row, angles)
+
+
+@numba.njit
+def predict_core(f, mean, cov, args, q_cov, weights, angles, out_mean, out_cov) -> int:
+    """Additive-noise prediction of every run (module docstring), ``f(x, args, out)`` per point.
+
+    ``mean (B, n)``, ``cov (B, n, n)``, ``args (B or 1, k)``, ``q_cov (B or 1, n, n)``,
+    ``weights (3,) = (gamma, W_i, c0)``, ``angles`` the state's angle indices (int64);
+    writes ``out_mean (B, n)``, ``out_cov (B, n, n)``. Returns a status code.
+    """
+    runs, n = mean.shape
+    if not all_finite(args):
+        return NOT_FINITE
+    gamma = weights[0]
+    chol = np.empty((n, n))
+    point = np.empty(n)
+    y0 = np.empty(n)
+    shift = np.empty(n)
+    dev = np.empty((2 * n, n))
+    for b in range(runs):
+        if not cholesky_lower(cov[b], chol):
+            return NOT_POSITIVE_DEFINITE
+        _deviations(f, mean[b], chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, y0, dev)
+        _moments(dev, 2 * n, y0, weights, angles, q_cov[b if q_cov.shape[0] > 1 else 0], out_mean[b], out_cov[b],
+                 shift)
+        if not (all_finite(out_mean[b]) and all_finite(out_cov[b])):
+            return NOT_FINITE
+    return OK
+
+
+@numba.njit
+def augmented_predict_core(f, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov) -> int:
+    """Augmented-noise prediction of every run, ``f(x, w, args, out)`` per point.
+
+    As :func:`predict_core` with ``noise_sqrt (B or 1, q, q)`` a square root ``S S^T = Q``
+    (:attr:`~localization.models.ProcessModel.noise_sqrt`) and ``weights`` those of dimension
+    ``n + q``. The ``2 (n + q)`` sigma points: ``(x +- gamma L_i, 0)`` for the state columns,
+    ``(x, +-gamma S_j)`` for the noise columns.
+    """
+    runs, n = mean.shape
+    q = noise_sqrt.shape[1]
+    if not all_finite(args):
+        return NOT_FINITE
+    gamma = weights[0]
+    chol = np.empty((n, n))
+    point = np.empty(n)
+    noise = np.empty(q)
+    y0 = np.empty(n)
+    shift = np.empty(n)
+    dev = np.empty((2 * (n + q), n))
+    no_noise_cov = np.empty((0, 0))
+    for b in range(runs):
+        if not cholesky_lower(cov[b], chol):
+            return NOT_POSITIVE_DEFINITE
+        x = mean[b]
+        root = noise_sqrt[b if noise_sqrt.shape[0] > 1 else 0]
+        step_args = args[b if args.shape[0] > 1 else 0]
+        point[:] = x
+        noise[:] = 0.0
+        f(point, noise, step_args, y0)
+        dim = n + q
+        for i in range(dim):
+            for half in range(2):
+                row = i + half * dim
+                for j in range(n):
+                    spread = gamma * chol[j, i] if i < n else 0.0
+                    point[j] = x[j] + spread if half == 0 else x[j] - spread
+                for j in range(q):
+                    spread = gamma * root[j, i - n] if i >= n else 0.0
+                    noise[j] = spread if half == 0 else -spread
+                f(point, noise, step_args, dev[row])
+                for j in range(n):
+                    dev[row, j] -= y0[j]
+                _wrap_row(dev, row, angles)
+        _moments(dev, 2 * dim, y0, weights, angles, no_noise_cov, out_mean[b], out_cov[b], shift)
+        if not (all_finite(out_mean[b]) and all_finite(out_cov[b])):
+            return NOT_FINITE
+    return OK
+
+
+@numba.njit
+def update_core(h, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov) -> int:
+    """Measurement update of every run (module docstring), ``h(x, args, out)`` per point.
+
+    ``mean (B, n)``, ``cov (B, n, n)``, ``z (B, m)``, ``args (B or 1, k)``,
+    ``r_cov (B or 1, m, m)``, ``weights (3,) = (gamma, W_i, c0)``, ``state_angles`` and
+    ``angles`` (the measurement's) angle indices (int64); writes ``out_mean (B, n)``,
+    ``out_cov (B, n, n)``. Returns a status code.
+    """
+    runs, n = mean.shape
+    m = z.shape[1]
+    if not (all_finite(args) and all_finite(z)):
+        return NOT_FINITE
+    gamma = weights[0]
+    chol = np.empty((n, n))
+    point = np.empty(n)
+    z0 = np.empty(m)
+    shift = np.empty(m)
+    dev = np.empty((2 * n, m))
+    z_pred = np.empty(m)
+    s_cov = np.empty((m, m))
+    s_chol = np.empty((m, m))
+    cross = np.empty((n, m))
+    gain_t = np.empty((m, n))
+    innovation = np.empty(m)
+    for b in range(runs):
+        prior = cov[b]
+        if not cholesky_lower(prior, chol):
+            return NOT_POSITIVE_DEFINITE
+        x = mean[b]
+        _deviations(h, x, chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, z0, dev)
+        _moments(dev, 2 * n, z0, weights, angles, r_cov[b if r_cov.shape[0] > 1 else 0], z_pred, s_cov, shift)
+        scale = weights[1] * gamma
+        for i in range(n):  # Pxz = W_i gamma L (D_{1..n} - D_{n+1..2n})
+            for c in range(m):
+                total = 0.0
+                for k in range(n):
+                    total += chol[i, k] * (dev[k, c] - dev[n + k, c])
+                cross[i, c] = scale * total
+        if not cholesky_lower(s_cov, s_chol):
+            return NOT_POSITIVE_DEFINITE
+        for c in range(m):
+            innovation[c] = z[b, c] - z_pred[c]
+            for i in range(n):
+                gain_t[c, i] = cross[i, c]
+        for a in angles:
+            innovation[a] = wrap_angle(innovation[a])
+        cholesky_solve(s_chol, gain_t, gain_t)  # K^T = S^-1 Pxz^T
+        new_mean = out_mean[b]
+        for i in range(n):  # x+ = x- + K (z - z-)
+            total = 0.0
+            for c in range(m):
+                total += innovation[c] * gain_t[c, i]
+            new_mean[i] = x[i] + total
+        for a in state_angles:
+            new_mean[a] = wrap_angle(new_mean[a])
+        new_cov = out_cov[b]
+        for i in range(n):  # P+ = P- - Pxz K^T, symmetrised
+            for j in range(n):
+                total = 0.0
+                for c in range(m):
+                    total += cross[i, c] * gain_t[c, j]
+                new_cov[i, j] = prior[i, j] - total
+        for i in range(n):
+            for j in range(i):
+                value = (new_cov[i, j] + new_cov[j, i]) * 0.5
+                new_cov[i, j] = value
+                new_cov[j, i] = value
+        if not (all_finite(new_mean) and all_finite(new_cov)):
+            return NOT_FINITE
+    return OK
+
+
+# ------------------------------------------------------------------- cached built-in entries
+# Module-level entries, so numba caches their machine code on disk; one entry holds the
+# four motion models (a closure per model would not be cached). The
+# kernel is named as a module attribute (``kernels.ctrv_point``): numba resolves that to a
+# constant while typing, whereas a bare imported name passed as a value is lowered as a
+# pointer to the Python object, which makes the entry uncacheable ("dynamic globals").
+
+
+#: The built-in process kernels (additive, augmented), by the number the entries switch on.
+BUILTIN_PROCESS_KERNELS = (
+    (kernels.cv_point, kernels.cv_noisy_point),
+    (kernels.ctrv_point, kernels.ctrv_noisy_point),
+    (kernels.ctra_point, kernels.ctra_noisy_point),
+    (kernels.cca_point, kernels.cca_noisy_point),
+)
+
+
+@numba.njit(cache=True)
+def _predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
+    """:func:`predict_core` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    if model == 0:
+        return predict_core(kernels.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+    if model == 1:
+        return predict_core(kernels.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+    if model == 2:
+        return predict_core(kernels.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+    return predict_core(kernels.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+
+
+@numba.njit(cache=True)
+def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
+    """:func:`augmented_predict_core` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    if model == 0:
+        return augmented_predict_core(kernels.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov)
+    if model == 1:
+        return augmented_predict_core(kernels.ctrv_noisy_point, mean, cov, args, root, weights, angles, out_mean,
+                                      out_cov)
+    if model == 2:
+        return augmented_predict_core(kernels.ctra_noisy_point, mean, cov, args, root, weights, angles, out_mean,
+                                      out_cov)
+    return augmented_predict_core(kernels.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov)
+
+
+@numba.njit(cache=True)
+def _update_leading_entries(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
+    return update_core(kernels.leading_entries_point, mean, cov, z, args, r_cov, weights, state_angles, angles,
+                       out_mean, out_cov)
+
+
+#: Prediction entries by (kernel, augmented): ``(entry, number)``, called ``entry(number, ...)``;
+#: the built-ins' (cached on disk), then users' (:func:`predict_entry`).
+PREDICT_ENTRIES = {
+    (kernel, bool(augmented)): (_noisy_predict_builtin if augmented else _predict_builtin, number)
+    for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
+    for augmented, kernel in enumerate(pair)
+}
+
+#: Cached entries of the built-in measurement kernels, by kernel.
+UPDATE_ENTRIES = {kernels.leading_entries_point: _update_leading_entries}
+
+
+# -------------------------------------------------------------------- entries of user kernels
+
+
+def predict_entry(point, augmented: bool) -> tuple:
+    """``(entry, number)``: the compiled prediction entry of the process kernel ``point``, to be
+    called ``entry(number, mean, ...)`` (built-in: cached on disk; a user's: built here once
+    per kernel and process, compiled at its first call; its number is unused)."""
+    key = (point, augmented)
+    found = PREDICT_ENTRIES.get(key)
+    if found is None:
+        if augmented:
+            @numba.njit
+            def entry(model, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov):
+                return augmented_predict_core(point, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov)
+        else:
+            @numba.njit
+            def entry(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
+                return predict_core(point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+        found = PREDICT_ENTRIES[key] = (entry, -1)
+    return found
+
+
+def update_entry(point):
+    """The compiled update entry of the measurement kernel ``point`` (as :func:`predict_entry`)."""
+    entry = UPDATE_ENTRIES.get(point)
+    if entry is None:
+        @numba.njit
+        def entry(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
+            return update_core(point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov)
+        UPDATE_ENTRIES[point] = entry
+    return entry
+
+
+# -------------------------------------------------------------------------- the Python side
+# A single step's budget is a few microseconds, so the glue below avoids every check it can:
+# noise matrices are read-only C-contiguous float arrays by construction (models.py), beliefs
+# almost always are, and a step's arguments are usually the same float every step.
+
+_F64 = np.dtype(np.float64)
+_ANGLE_ARRAYS: dict[tuple[int, ...], np.ndarray] = {}
+_PACKED_FLOATS: dict[tuple[float, ...], np.ndarray] = {}  # recent all-float arguments, packed
+_PACKED_FLOATS_MAX = 64
+
+
+def angle_array(angle_indices: tuple[int, ...]) -> np.ndarray:
+    """The angle indices as a read-only int64 array (memoised per tuple)."""
+    found = _ANGLE_ARRAYS.get(angle_indices)
+    if found is None:
+        found = np.array(angle_indices, dtype=np.int64)
+        found.flags.writeable = False
+        _ANGLE_ARRAYS[angle_indices] = found
+    return found
+
+
+def read_only(values: np.ndarray) -> np.ndarray:
+    """``values`` as a read-only C-contiguous float64 array (itself when it already is one)."""
+    flags = values.flags
+    if flags.writeable or not flags.c_contiguous or values.dtype is not _F64:
+        values = np.array(values, dtype=np.float64, order="C")
+        values.flags.writeable = False
+    return values
+
+
+def writable(values: np.ndarray) -> np.ndarray:
+    """``values`` as a writable C-contiguous float64 array (itself when it already is one): a
+    measurement ``z`` is usually a user's writable array, so this spares a copy per step."""
+    flags = values.flags
+    if not flags.writeable or not flags.c_contiguous or values.dtype is not _F64:
+        values = np.array(values, dtype=np.float64, order="C")
+    return values
+
+
+def pack_args(args: tuple, batch: tuple[int, ...]) -> np.ndarray | None:
+    """The step's arguments as read-only floats ``(B or 1, k)``, or ``None`` when they cannot be packed.
+
+    Each argument, in order, contributes its entries flattened: a number one column, a
+    per-run array (leading axis ``B``, as :func:`localization.ukf.at_sigma_points` decides) its
+    entries per run, any other real array its entries shared by every run. Anything else (not
+    real numbers) gives ``None``: the numpy path then takes the step. All-float arguments are
+    memoised (a filter's ``dt_s`` repeats every step; at most a few dozen are kept).
+    """
+    try:
+        packed = _PACKED_FLOATS.get(args)
+    except TypeError:  # an unhashable argument (an array)
+        packed = None
+    if packed is not None:
+        return packed
+    if all(type(a) is float for a in args):  # the common case: (dt_s,) or ()
+        if len(_PACKED_FLOATS) >= _PACKED_FLOATS_MAX:
+            _PACKED_FLOATS.clear()
+        packed = _PACKED_FLOATS[args] = np.array([args], dtype=np.float64).reshape(1, len(args))
+        packed.flags.writeable = False
+        return packed
+    runs = batch[0] if batch else 1
+    columns, per_run = [], False
+    for a in args:
+        if isinstance(a, (int, float, np.integer, np.floating)):
+            columns.append(np.full((1, 1), float(a)))
+        elif isinstance(a, np.ndarray) and a.dtype.kind in "biuf":
+            per_run_array = bool(batch) and a.shape[:1] == batch
+            columns.append(a.reshape(runs, -1) if per_run_array else a.reshape(1, -1))
+            per_run = per_run or per_run_array
+        else:
+            return None
+    rows = runs if per_run else 1
+    packed = np.empty((rows, sum(c.shape[1] for c in columns)))
+    start = 0
+    for c in columns:
+        packed[:, start : start + c.shape[1]] = c
+        start += c.shape[1]
+    packed.flags.writeable = False
+    return packed
+
+
+def _per_run(cov: np.ndarray, runs: int) -> np.ndarray | None:
+    """A noise matrix ``(k, k)`` or per-run ``(B, k, k)`` as ``(1 or B, k, k)``, or ``None``."""
+    if cov.ndim == 2:
+        return cov[None]
+    if cov.ndim == 3 and cov.shape[0] == runs:
+        return cov
+    return None
+
+
+def _compile_error(kind: str, point, exc: Exception) -> EstimationError:
+    name = getattr(point, "__name__", repr(point))
+    expected = "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
+    return EstimationError(
+        f"UKF {kind}: the kernel {name} does not compile for this step (expected {expected} "
+        f"on float64 arrays): {str(exc).strip().splitlines()[0]}"
+    )
+
+
+def _runs(mean: np.ndarray) -> int:
+    """The number of runs of a belief that the compiled path takes, or 0 (numpy path)."""
+    if mean.ndim == 1:
+        return 1
+    return mean.shape[0] if mean.ndim == 2 else 0
+
+
+def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple):
+    """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
+
+    ``weights`` are the :class:`~localization.sigma_points.SigmaWeights` of the state (or of
+    the augmented state); ``model`` a :class:`~localization.models.ProcessModel` with a kernel.
+    ``None`` when the step is not expressible here (a batch of more than one axis or empty,
+    arguments that are not numbers, a noise matrix of another batch) or failed (status).
+    """
+    runs = _runs(mean)
+    augmented = model.noise == "augmented"
+    noise = _per_run(model.noise_sqrt if augmented else model.Q, runs)
+    packed = pack_args(args, mean.shape[:-1])
+    if runs == 0 or noise is None or packed is None:
+        return None
+    n = mean.shape[-1]
+    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    entry, number = PREDICT_ENTRIES.get((model.point, augmented)) or predict_entry(model.point, augmented)
+    try:
+        status = entry(number, read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)), packed, noise,
+                       weights.packed, angle_array(angle_indices), out_mean, out_cov)
+    except numba.core.errors.TypingError as exc:
+        raise _compile_error("predict", model.point, exc) from None
+    if status != OK:
+        return None
+    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
+
+
+def update(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple):
+    """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
+
+    As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
+    (the numpy path then refuses it with its message).
+    """
+    runs = _runs(mean)
+    r_cov = _per_run(model.R, runs)
+    packed = pack_args(args, mean.shape[:-1])
+    m = model.R.shape[-1]
+    if (
+        runs == 0 or r_cov is None or packed is None
+        or not isinstance(z, np.ndarray) or z.shape != mean.shape[:-1] + (m,) or z.dtype.kind not in "biuf"
+    ):
+        return None
+    n = mean.shape[-1]
+    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    entry = UPDATE_ENTRIES.get(model.point) or update_entry(model.point)
+    try:
+        status = entry(read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)),
+                       writable(z.reshape(runs, m)), packed, r_cov, weights.packed,
+                       angle_array(angle_indices), angle_array(model.angle_indices), out_mean, out_cov)
+    except numba.core.errors.TypingError as exc:
+        raise _compile_error("update", model.point, exc) from None
+    if status != OK:
+        return None
+    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
