@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from localization.gaussian import Gaussian
-from localization.models import MeasurementModel, ProcessModel
-from localization.motion_models import MODELS, MotionModel, gps_position
+from localization.models import MeasurementModel
+from localization.motion_models import MODELS, MotionModel, gps_model
 from localization.sigma_points import ScaledSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
 from robotsim.vehicle.drives import DRIVES
@@ -127,10 +127,9 @@ def run_filter(
     runs, epochs = meas.speed_m_s.shape
     dt_s = 1.0 / meas.params.odometry_rate_hz
     ukf = UnscentedKalmanFilter(points=points)
-    process = ProcessModel(
-        f=model.transition_with_noise, Q=np.diag(model.process_noise_std(dt_s) ** 2), noise="augmented"
-    )
-    gps = MeasurementModel(h=gps_position, R=meas.params.gps_noise_std_m**2 * np.eye(2))
+    # the models' compiled kernels: the UKF's compiled path for the prediction and the GPS update
+    process = model.process_model(np.diag(model.process_noise_std(dt_s) ** 2), noise="augmented")
+    gps = gps_model(meas.params.gps_noise_std_m**2 * np.eye(2))
     readings = {"speed": meas.speed_m_s, "yaw_rate": meas.yaw_rate_rad_s}  # (R, K) each
     noise_std = {"speed": meas.params.speed_noise_std_m_s, "yaw_rate": meas.params.yaw_rate_noise_std_rad_s}
     odometry = MeasurementModel(

@@ -25,3 +25,9 @@ def test_the_filter_example_runs():
     gain = predicted @ h.T @ np.linalg.inv(h @ predicted @ h.T + 2.25 * np.eye(2))
     np.testing.assert_allclose(belief.cov[0], predicted - gain @ h @ predicted, atol=1e-12)
     assert belief.cov[0, 0, 0] < min(predicted[0, 0], 2.25)
+    # the user's own numpy model (`mine`) and the compiled `gps` model give the same update
+    ukf, z = namespace["ukf"], np.array([0.3, -0.2])
+    compiled = ukf.update(start, z, namespace["gps"])
+    numpy_path = ukf.update(start, z, namespace["mine"])
+    np.testing.assert_allclose(compiled.mean, numpy_path.mean, atol=1e-12)
+    np.testing.assert_allclose(compiled.cov, numpy_path.cov, atol=1e-12)
