@@ -63,7 +63,9 @@ class TrackerSettings:
     miss it (False; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger
     where few sensors see a wall, and a kidnapping is then detected later. ``engine``: the
     implementation of the sonar box test, one of :data:`intervals.sonar.ENGINES` (the compiled
-    kernel by default; ``"numpy"`` is its reference, same sets).
+    kernel by default; ``"numpy"`` is its reference, same sets). ``ray_test``: add the ray test
+    of :mod:`intervals.rays` to the box test (``None``: only for thin cones, see
+    :data:`intervals.sonar.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
     """
 
     v_max_m_s: float
@@ -75,6 +77,7 @@ class TrackerSettings:
     imagesp_pitch_m: float = 0.2
     guaranteed: bool = True
     engine: str = "compiled"
+    ray_test: bool | None = None
 
     def __post_init__(self) -> None:
         checks = (
@@ -90,6 +93,7 @@ class TrackerSettings:
             (np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
              "imagesp_pitch_m must be >= eps_m"),
             (self.engine in ENGINES, f"engine must be one of {ENGINES}"),
+            (self.ray_test is None or isinstance(self.ray_test, bool), "ray_test must be True, False or None"),
         )
         for ok, message in checks:
             if not ok:
@@ -193,7 +197,7 @@ class IntervalTracker:
     def _search(self, scan: SonarScan, initial: np.ndarray):
         s = self.settings
         return gomne(scan, initial, s.eps_m, s.q_max, s.heading_scale_m_per_rad,
-                     guaranteed=s.guaranteed, engine=s.engine)
+                     guaranteed=s.guaranteed, engine=s.engine, ray_test=s.ray_test)
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
         """One epoch from the previous set (None: the start, or the epoch after one without a

@@ -211,6 +211,7 @@ def tracker_settings(spec: ScenarioSpec) -> TrackerSettings:
         tracker=est.tracker,
         imagesp_pitch_m=est.imagesp_pitch_m,
         guaranteed=est.guaranteed,
+        ray_test=est.ray_test,
     )
 
 

@@ -169,6 +169,7 @@ BAD = {
     "estimation rate above sonar": ("[estimation]\ninterval_rate_hz = 2\n", "estimation.interval_rate_hz", "whole number"),
     "estimation pitch": ("[estimation]\nimagesp_pitch_m = 0.01\n", "estimation.imagesp_pitch_m", ">= eps_m"),
     "estimation guaranteed": ("[estimation]\nguaranteed = 'yes'\n", "estimation.guaranteed", "true or false"),
+    "estimation ray test": ("[estimation]\nray_test = 'auto'\n", "estimation.ray_test", "true or false"),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -212,11 +213,12 @@ def test_estimation_defaults_and_values():
     text = (
         "[sensors.sonar]\nrate_hz = 4.0\n[estimation]\nfilter = 'iekf'\ntracker = 'imagesp'\n"
         "fusion = 'clamp_heading'\neps_m = 0.1\nq_max = 3\nguaranteed = false\ninterval_rate_hz = 1.0\n"
-        "free_space = false\n"
+        "free_space = false\nray_test = true\n"
     )
     est = parse(BASE + text).estimation
     assert (est.filter, est.tracker, est.fusion, est.eps_m, est.q_max) == ("iekf", "imagesp", "clamp_heading", 0.1, 3)
     assert est.scan_stride(4.0) == 4 and est.free_space is False and est.guaranteed is False
+    assert est.ray_test is True and spec.estimation.ray_test is None  # absent: by the aperture
 
 
 def test_empty_map_is_refused():
