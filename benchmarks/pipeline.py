@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         f"pipeline {args.scenario} ({spec.estimation.tracker}, {spec.estimation.filter}, "
         f"{spec.estimation.fusion}): {args.duration:g} s; first run and best of {len(runs)}"
     )
-    print(f"| stage | first (s) | best (s) | share |\n|---|---|---|---|")
+    print("| stage | first (s) | best (s) | share |\n|---|---|---|---|")
     for name in STAGES:
         print(f"| {name} | {first[name]:.3f} | {best[name]:.3f} | {best[name] / sum(best.values()):.1%} |")
     print(f"| **total** | **{sum(first.values()):.3f}** | **{sum(best.values()):.3f}** | |")

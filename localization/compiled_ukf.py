@@ -44,8 +44,8 @@ prediction entry switches between the four motion models, so their first compila
 10 s per noise kind, happens together);
 for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
 compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
-file only: after changing a kernel in :mod:`localization.motion_models`, delete the
-``compiled_ukf*.nbi/.nbc`` files in ``localization/__pycache__``.
+file only; :mod:`localization.kernel_cache` drops the package's cache whenever a kernel source
+(:mod:`localization.motion_models` among them) changes.
 
 Status. An entry returns :data:`OK`, :data:`NOT_POSITIVE_DEFINITE` (a covariance to factorise,
 ``P`` or ``S``) or :data:`NOT_FINITE` (an argument or a result). On anything but ``OK`` the
@@ -59,8 +59,6 @@ for bit.
 """
 
 from __future__ import annotations
-
-import math
 
 import numba
 import numpy as np
@@ -112,6 +110,17 @@ def _moments(dev, count, y0, weights, angles, noise_cov, out_mean, out_cov, shif
                 value = value + noise_cov[j, k]
             out_cov[j, k] = value
             out_cov[k, j] = value
+
+
+@numba.njit(cache=True)
+def symmetrise_in_place(matrix) -> None:
+    """``matrix (n, n) = (matrix + matrix^T) / 2`` in place (exactly symmetric)."""
+    n = matrix.shape[0]
+    for i in range(n):
+        for j in range(i):
+            value = 0.5 * (matrix[i, j] + matrix[j, i])
+            matrix[i, j] = value
+            matrix[j, i] = value
 
 
 @numba.njit(cache=True)
@@ -281,11 +290,7 @@ def update_core(h, mean, cov, z, args, r_cov, weights, state_angles, angles, out
                 for c in range(m):
                     total += cross[i, c] * gain_t[c, j]
                 new_cov[i, j] = prior[i, j] - total
-        for i in range(n):
-            for j in range(i):
-                value = (new_cov[i, j] + new_cov[j, i]) * 0.5
-                new_cov[i, j] = value
-                new_cov[j, i] = value
+        symmetrise_in_place(new_cov)
         if not (all_finite(new_mean) and all_finite(new_cov)):
             return NOT_FINITE
     return OK
@@ -466,7 +471,7 @@ def pack_args(args: tuple, batch: tuple[int, ...]) -> np.ndarray | None:
     return packed
 
 
-def _per_run(cov: np.ndarray, runs: int) -> np.ndarray | None:
+def per_run(cov: np.ndarray, runs: int) -> np.ndarray | None:
     """A noise matrix ``(k, k)`` or per-run ``(B, k, k)`` as ``(1 or B, k, k)``, or ``None``."""
     if cov.ndim == 2:
         return cov[None]
@@ -475,16 +480,23 @@ def _per_run(cov: np.ndarray, runs: int) -> np.ndarray | None:
     return None
 
 
-def _compile_error(kind: str, point, exc: Exception) -> EstimationError:
-    name = getattr(point, "__name__", repr(point))
-    expected = "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
+def compile_error(filter_name: str, kind: str, point, exc: Exception) -> EstimationError:
+    """The error for a user's kernel (or tuple of kernels, the EKF's model and Jacobian) that
+    does not compile for a ``kind`` (``"predict"`` or ``"update"``) step of ``filter_name``."""
+    points = point if isinstance(point, tuple) else (point,)
+    names = " and ".join(getattr(p, "__name__", repr(p)) for p in points)
+    if filter_name == "EKF":
+        expected = "h(x, args, out (m,)) and H(x, args, out (m, n))" if kind == "update" else (
+            "f(x, args, out (n,)) and F(x, args, out (n, n))")
+    else:
+        expected = "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
     return EstimationError(
-        f"UKF {kind}: the kernel {name} does not compile for this step (expected {expected} "
+        f"{filter_name} {kind}: the kernel {names} does not compile for this step (expected {expected} "
         f"on float64 arrays): {str(exc).strip().splitlines()[0]}"
     )
 
 
-def _runs(mean: np.ndarray) -> int:
+def runs_of(mean: np.ndarray) -> int:
     """The number of runs of a belief that the compiled path takes, or 0 (numpy path)."""
     if mean.ndim == 1:
         return 1
@@ -499,9 +511,9 @@ def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int
     ``None`` when the step is not expressible here (a batch of more than one axis or empty,
     arguments that are not numbers, a noise matrix of another batch) or failed (status).
     """
-    runs = _runs(mean)
+    runs = runs_of(mean)
     augmented = model.noise == "augmented"
-    noise = _per_run(model.noise_sqrt if augmented else model.Q, runs)
+    noise = per_run(model.noise_sqrt if augmented else model.Q, runs)
     packed = pack_args(args, mean.shape[:-1])
     if runs == 0 or noise is None or packed is None:
         return None
@@ -512,7 +524,7 @@ def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int
         status = entry(number, read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)), packed, noise,
                        weights.packed, angle_array(angle_indices), out_mean, out_cov)
     except numba.core.errors.TypingError as exc:
-        raise _compile_error("predict", model.point, exc) from None
+        raise compile_error("UKF", "predict", model.point, exc) from None
     if status != OK:
         return None
     return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
@@ -524,8 +536,8 @@ def update(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int,
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
     (the numpy path then refuses it with its message).
     """
-    runs = _runs(mean)
-    r_cov = _per_run(model.R, runs)
+    runs = runs_of(mean)
+    r_cov = per_run(model.R, runs)
     packed = pack_args(args, mean.shape[:-1])
     m = model.R.shape[-1]
     if (
@@ -541,7 +553,7 @@ def update(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int,
                        writable(z.reshape(runs, m)), packed, r_cov, weights.packed,
                        angle_array(angle_indices), angle_array(model.angle_indices), out_mean, out_cov)
     except numba.core.errors.TypingError as exc:
-        raise _compile_error("update", model.point, exc) from None
+        raise compile_error("UKF", "update", model.point, exc) from None
     if status != OK:
         return None
     return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])

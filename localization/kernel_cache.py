@@ -21,7 +21,9 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-KERNEL_SOURCES = ("compiled_linalg.py", "compiled_ukf.py", "motion_models.py", "dead_reckoning_kernel.py")
+KERNEL_SOURCES = (
+    "compiled_linalg.py", "compiled_ukf.py", "compiled_ekf.py", "motion_models.py", "dead_reckoning_kernel.py"
+)
 """The files whose compiled code numba's cache entries of this package contain."""
 
 MARKER_NAME = "numba-kernels.sha256"

@@ -23,8 +23,14 @@ compiled with ``numba.njit``, which lets the UKF take its compiled path
   ``args`` are the step's arguments packed as floats, each flattened, in order (per-run
   arrays give their run's entries); ``x`` and ``w`` are scratch copies the kernel may overwrite.
 
-The kernel must compute the batched function to rounding: the numpy path (the reference, and
-the fallback whenever a compiled step cannot run or fails) uses the batched one.
+With a per-point Jacobian kernel as well (``jacobian_point=``, used together with ``point`` and
+``jacobian``; additive noise), the EKF takes its compiled path (:mod:`localization.compiled_ekf`):
+
+- ``F(x (n,), args (k,), out (n, n))``, ``H(x (n,), args (k,), out (m, n))``: every entry of
+  ``out`` written.
+
+The kernels must compute the batched functions to rounding: the numpy path (the reference, and
+the fallback whenever a compiled step cannot run or fails) uses the batched ones.
 """
 
 from __future__ import annotations
@@ -40,10 +46,10 @@ from localization.errors import EstimationError
 from localization.linalg import symmetrise, wrap_columns
 
 
-def _check_kernel(owner: str, point) -> None:
-    """Refuse a ``point`` kernel that is not a numba-compiled function (or ``None``)."""
+def _check_kernel(owner: str, point, name: str = "point") -> None:
+    """Refuse a kernel ``name`` that is not a numba-compiled function (or ``None``)."""
     if point is not None and not isinstance(point, numba.core.registry.CPUDispatcher):
-        raise EstimationError(f"{owner}: point must be a numba.njit-compiled function or None, got {point!r}")
+        raise EstimationError(f"{owner}: {name} must be a numba.njit-compiled function or None, got {point!r}")
 
 
 def _noise_covariance(matrix: np.ndarray, owner: str, name: str) -> np.ndarray:
@@ -75,6 +81,8 @@ class ProcessModel:
             eigen-decomposition, so a singular ``Q`` is fine) for the augmented sigma points.
         point: optional per-point kernel computing ``f`` for one sigma point (module
             docstring); the UKF's compiled path.
+        jacobian_point: optional per-point kernel computing ``jacobian`` for one state
+            (module docstring); with ``point``, the EKF's compiled path.
     """
 
     f: Callable[..., np.ndarray]
@@ -82,6 +90,7 @@ class ProcessModel:
     jacobian: Callable[..., np.ndarray] | None = None
     noise: Literal["additive", "augmented"] = "additive"
     point: Callable[..., None] | None = None
+    jacobian_point: Callable[..., None] | None = None
     noise_sqrt: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -92,6 +101,7 @@ class ProcessModel:
         if self.noise not in ("additive", "augmented"):
             raise EstimationError(f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}")
         _check_kernel("ProcessModel", self.point)
+        _check_kernel("ProcessModel", self.jacobian_point, "jacobian_point")
         q_cov = _noise_covariance(self.Q, "ProcessModel", "Q")
         eigenvalues, eigenvectors = np.linalg.eigh(q_cov)
         noise_sqrt = eigenvectors * np.sqrt(np.maximum(eigenvalues, 0.0))[..., None, :]
@@ -111,6 +121,8 @@ class MeasurementModel:
         angle_indices: the measurement components that are angles (residuals wrapped).
         point: optional per-point kernel computing ``h`` for one sigma point (module
             docstring); the UKF's compiled path.
+        jacobian_point: optional per-point kernel computing ``jacobian`` for one state
+            (module docstring); with ``point``, the EKF's compiled path.
     """
 
     h: Callable[..., np.ndarray]
@@ -118,6 +130,7 @@ class MeasurementModel:
     jacobian: Callable[..., np.ndarray] | None = None
     angle_indices: tuple[int, ...] = ()
     point: Callable[..., None] | None = None
+    jacobian_point: Callable[..., None] | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.h):
@@ -125,6 +138,7 @@ class MeasurementModel:
         _check_kernel("MeasurementModel", self.point)
         if self.jacobian is not None and not callable(self.jacobian):
             raise EstimationError("MeasurementModel: jacobian must be callable or None")
+        _check_kernel("MeasurementModel", self.jacobian_point, "jacobian_point")
         R = _noise_covariance(self.R, "MeasurementModel", "R")
         m = R.shape[-1]
         angles = tuple(int(i) for i in self.angle_indices)

@@ -57,9 +57,11 @@ ramp over the step: the state is propagated with the quantity at its mid-step va
 ``q + e/2`` and ends at ``q + e`` (exact for CV and for the speed rows, second order
 otherwise). This is the noise augmentation of the UKF (state augmented by ``e``).
 
-Per-point kernels (numba, for the compiled UKF of :mod:`localization.compiled_ukf`): each
-transition also exists as ``*_point(x (n,), args (1,) = (dt_s,), out (n,))`` and, noise
-augmented, ``*_noisy_point(x, e (2,), args, out)``, written with the same formulas in the same
+Per-point kernels (numba, for the compiled UKF of :mod:`localization.compiled_ukf` and the
+compiled EKF of :mod:`localization.compiled_ekf`): each transition also exists as
+``*_point(x (n,), args (1,) = (dt_s,), out (n,))``, noise augmented as
+``*_noisy_point(x, e (2,), args, out)``, and its Jacobian as
+``*_jacobian_point(x, args, out (n, n))``, written with the same formulas in the same
 order as the batched version (equal to rounding; tested). :meth:`MotionModel.process_model`,
 :func:`gps_model` and :func:`pose_model` build models that carry them.
 """
@@ -77,6 +79,11 @@ from localization.compiled_linalg import wrap_angle as wrap_angle_scalar
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
+
+Array = np.ndarray
+"""A float array; shapes are given in the docstrings."""
+Transition = Callable[..., np.ndarray]
+"""A batched model function ``(x (..., n), *args) -> (..., n)`` or its Jacobian ``(..., n, n)``."""
 
 #: Below this ``|u|`` the moments ``M_1^s`` and ``M_2^s`` use their Taylor series (their
 #: closed forms cancel to ``u^2``); above it the closed forms lose at most 1e-13 relative.
@@ -476,26 +483,13 @@ def ctrv_point(x, args, out) -> None:
 @numba.njit(cache=True)
 def ctra_point(x, args, out) -> None:
     """:func:`ctra_transition` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6,)``
-    (the moments of :func:`trig_moments` to order 1 for one turned angle ``u``)."""
+    (the moments of :func:`trig_moments` for one turned angle ``u``)."""
     dt = args[0]
     theta, v, accel, omega = x[2], x[3], x[4], x[5]
     u = omega * dt
-    u_nz = 1e-300 if u == 0.0 else u
-    half = 0.5 * u_nz
-    sin_h = math.sin(half)
-    sinc_u = math.sin(u_nz) / u_nz
-    sinc_h = sin_h / half
-    u2 = u * u
-    if abs(u) < _SERIES_BELOW:
-        m1s_over_u = _M1S_OVER_U[4]
-        for k in range(3, -1, -1):
-            m1s_over_u = m1s_over_u * u2 + _M1S_OVER_U[k]
-    else:
-        m1s_over_u = (sinc_u - math.cos(u)) / u2
-    mc1 = sinc_u - 0.5 * sinc_h * sinc_h
-    ms1 = u * m1s_over_u
-    forward = v * dt * sinc_u + accel * (dt * dt) * mc1
-    left = v * dt * (sin_h * sinc_h) + accel * (dt * dt) * ms1
+    mc0, mc1, _, ms0, ms1, _ = _trig_moments_point(u)
+    forward = v * dt * mc0 + accel * (dt * dt) * mc1
+    left = v * dt * ms0 + accel * (dt * dt) * ms1
     c, s = math.cos(theta), math.sin(theta)
     out[:] = x
     out[0] = x[0] + (c * forward - s * left)
@@ -562,16 +556,141 @@ def leading_entries_point(x, args, out) -> None:
         out[j] = x[j]
 
 
+@numba.njit(cache=True)
+def leading_entries_jacobian_point(x, args, out) -> None:
+    """``out (m, n) = [I 0]``: the Jacobian of :func:`leading_entries_point` (:func:`gps_jacobian`,
+    :func:`pose_jacobian`)."""
+    _identity_point(out)
+
+
+# Per-point Jacobian kernels (for localization.compiled_ekf): the batched Jacobians above for
+# one state, ``F(x (n,), args = (dt_s,), out (n, n))``, same formulas in the same order.
+
+
+@numba.njit(cache=True)
+def _trig_moments_point(u):
+    """:func:`trig_moments` to order 2 of one angle ``u``: ``(M0c, M1c, M2c, M0s, M1s, M2s)``."""
+    u_nz = 1e-300 if u == 0.0 else u
+    half = 0.5 * u_nz
+    sin_h = math.sin(half)
+    sinc_u = math.sin(u_nz) / u_nz
+    sinc_h = sin_h / half
+    u2 = u * u
+    cos_u = math.cos(u)
+    small = abs(u) < _SERIES_BELOW
+    if small:
+        m1s_over_u = _M1S_OVER_U[4]
+        m2s_over_u = _M2S_OVER_U[4]
+        for k in range(3, -1, -1):
+            m1s_over_u = m1s_over_u * u2 + _M1S_OVER_U[k]
+            m2s_over_u = m2s_over_u * u2 + _M2S_OVER_U[k]
+    else:
+        m1s_over_u = (sinc_u - cos_u) / u2
+    mc1 = sinc_u - 0.5 * sinc_h * sinc_h
+    if not small:
+        m2s_over_u = (2.0 * mc1 - cos_u) / u2
+    return sinc_u, mc1, sinc_u - 2.0 * m1s_over_u, sin_h * sinc_h, u * m1s_over_u, u * m2s_over_u
+
+
+@numba.njit(cache=True)
+def _identity_point(out) -> None:
+    """``out (m, n) = [I 0]`` (``m <= n``)."""
+    out[:] = 0.0
+    for j in range(out.shape[0]):
+        out[j, j] = 1.0
+
+
+@numba.njit(cache=True)
+def cv_jacobian_point(x, args, out) -> None:
+    """:func:`cv_jacobian` of one state ``x (4,)``, ``args = (dt_s,)``, into ``out (4, 4)``."""
+    dt = args[0]
+    _identity_point(out)
+    out[0, 2] = dt
+    out[1, 3] = dt
+
+
+@numba.njit(cache=True)
+def _ctra_like_jacobian_point(x, dt, accel, omega, i_omega, out) -> None:
+    """:func:`_ctra_like_jacobian` of one state (CTRV: ``accel`` is NaN and unused, no index 4 row)."""
+    theta, v = x[2], x[3]
+    has_accel = i_omega == 5
+    mc0, mc1, mc2, ms0, ms1, ms2 = _trig_moments_point(omega * dt)
+    forward = v * dt * mc0
+    left = v * dt * ms0
+    if has_accel:
+        forward = forward + accel * (dt * dt) * mc1
+        left = left + accel * (dt * dt) * ms1
+    c, s = math.cos(theta), math.sin(theta)
+    _identity_point(out)
+    out[0, 2] = -(s * forward + c * left)
+    out[1, 2] = c * forward - s * left
+    out[0, 3] = c * (dt * mc0) - s * (dt * ms0)
+    out[1, 3] = s * (dt * mc0) + c * (dt * ms0)
+    d_forward = -dt * dt * v * ms1
+    d_left = dt * dt * v * mc1
+    if has_accel:
+        d_forward = d_forward - dt**3 * accel * ms2
+        d_left = d_left + dt**3 * accel * mc2
+        out[0, 4] = c * ((dt * dt) * mc1) - s * ((dt * dt) * ms1)
+        out[1, 4] = s * ((dt * dt) * mc1) + c * ((dt * dt) * ms1)
+        out[3, 4] = dt
+    out[0, i_omega] = c * d_forward - s * d_left
+    out[1, i_omega] = s * d_forward + c * d_left
+    out[2, i_omega] = dt
+
+
+@numba.njit(cache=True)
+def ctrv_jacobian_point(x, args, out) -> None:
+    """:func:`ctrv_jacobian` of one state ``x (5,)``, ``args = (dt_s,)``, into ``out (5, 5)``."""
+    _ctra_like_jacobian_point(x, args[0], math.nan, x[4], 4, out)
+
+
+@numba.njit(cache=True)
+def ctra_jacobian_point(x, args, out) -> None:
+    """:func:`ctra_jacobian` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6, 6)``."""
+    _ctra_like_jacobian_point(x, args[0], x[4], x[5], 5, out)
+
+
+@numba.njit(cache=True)
+def cca_jacobian_point(x, args, out) -> None:
+    """:func:`cca_jacobian` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6, 6)``."""
+    dt = args[0]
+    theta, v, a, c = x[2], x[3], x[4], x[5]
+    s = v * dt + 0.5 * a * (dt * dt)
+    u = c * s
+    mc0, mc1, _, ms0, ms1, _ = _trig_moments_point(u)
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    _identity_point(out)
+    forward, left = s * mc0, s * ms0
+    out[0, 2] = -(sin_t * forward + cos_t * left)
+    out[1, 2] = cos_t * forward - sin_t * left
+    cos_u, sin_u = math.cos(u), math.sin(u)
+    tx = cos_t * cos_u - sin_t * sin_u
+    ty = sin_t * cos_u + cos_t * sin_u
+    out[0, 3] = tx * dt
+    out[1, 3] = ty * dt
+    out[0, 4] = tx * 0.5 * (dt * dt)
+    out[1, 4] = ty * 0.5 * (dt * dt)
+    d_forward, d_left = -s * s * ms1, s * s * mc1
+    out[0, 5] = cos_t * d_forward - sin_t * d_left
+    out[1, 5] = sin_t * d_forward + cos_t * d_left
+    out[2, 3] = c * dt
+    out[2, 4] = 0.5 * c * (dt * dt)
+    out[2, 5] = s
+    out[3, 4] = dt
+
+
 def gps_model(R: Array) -> MeasurementModel:
-    """The GPS position model ``(x_m, y_m)`` with noise ``R (2, 2)`` (m^2), with its kernel."""
-    return MeasurementModel(gps_position, R, jacobian=gps_jacobian, point=leading_entries_point)
+    """The GPS position model ``(x_m, y_m)`` with noise ``R (2, 2)`` (m^2), with its kernels."""
+    return MeasurementModel(gps_position, R, jacobian=gps_jacobian, point=leading_entries_point,
+                            jacobian_point=leading_entries_jacobian_point)
 
 
 def pose_model(R: Array) -> MeasurementModel:
     """The pose model ``(x_m, y_m, theta_rad)`` (CTRV, CTRA, CCA; heading an angle) with noise
-    ``R (3, 3)`` (m^2, m^2, rad^2), with its kernel."""
+    ``R (3, 3)`` (m^2, m^2, rad^2), with its kernels."""
     return MeasurementModel(pose_measurement, R, jacobian=pose_jacobian, angle_indices=(2,),
-                            point=leading_entries_point)
+                            point=leading_entries_point, jacobian_point=leading_entries_jacobian_point)
 
 
 # ----------------------------------------------------------------------------- the records
@@ -595,6 +714,7 @@ class MotionModel:
         noise_intensity: table I standard deviations, read as intensities per sqrt(second).
         point: the per-point kernel of ``transition`` (compiled UKF, additive noise).
         noisy_point: the per-point kernel of ``transition_with_noise`` (augmented noise).
+        jacobian_point: the per-point kernel of ``jacobian`` (compiled EKF).
     """
 
     name: str
@@ -610,6 +730,7 @@ class MotionModel:
     noise_intensity: tuple[float, ...]
     point: Callable[..., None]
     noisy_point: Callable[..., None]
+    jacobian_point: Callable[..., None]
 
     def __post_init__(self) -> None:
         q = len(self.noise_names)
@@ -651,11 +772,12 @@ class MotionModel:
         ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;
         ``noise="augmented"``: ``f = transition_with_noise`` with ``Q (2, 2)`` the covariance of
         the increments (e.g. ``np.diag(self.process_noise_std(dt_s) ** 2)``). Either way the
-        UKF takes its compiled path (the step's argument is ``dt_s``).
+        UKF takes its compiled path (the step's argument is ``dt_s``); additive, the EKF too.
         """
         if noise == "augmented":
             return ProcessModel(self.transition_with_noise, Q, noise="augmented", point=self.noisy_point)
-        return ProcessModel(self.transition, Q, jacobian=self.jacobian, noise=noise, point=self.point)
+        return ProcessModel(self.transition, Q, jacobian=self.jacobian, noise=noise, point=self.point,
+                            jacobian_point=self.jacobian_point)
 
 
 CV = MotionModel(
@@ -671,6 +793,7 @@ CV = MotionModel(
     noise_indices=(2, 3),
     point=cv_point,
     noisy_point=cv_noisy_point,
+    jacobian_point=cv_jacobian_point,
     noise_intensity=(0.5, 0.5),
 )
 CTRV = MotionModel(
@@ -686,6 +809,7 @@ CTRV = MotionModel(
     noise_indices=(3, 4),
     point=ctrv_point,
     noisy_point=ctrv_noisy_point,
+    jacobian_point=ctrv_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 CTRA = MotionModel(
@@ -701,6 +825,7 @@ CTRA = MotionModel(
     noise_indices=(4, 5),
     point=ctra_point,
     noisy_point=ctra_noisy_point,
+    jacobian_point=ctra_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 CCA = MotionModel(
@@ -716,6 +841,7 @@ CCA = MotionModel(
     noise_indices=(4, 5),
     point=cca_point,
     noisy_point=cca_noisy_point,
+    jacobian_point=cca_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 
