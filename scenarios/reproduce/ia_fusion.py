@@ -156,7 +156,7 @@ def markdown(table: dict[str, Any]) -> str:
     lines += ["", "Box area: (x, y) area of the union of the outer boxes of each epoch, mean over epochs.", ""]
     lines += ["## The paper's claims on this run", ""]
     lines += [f"- {'holds' if ok else 'DOES NOT HOLD'}: {claim}" for claim, ok in table["claims"].items()]
-    lines += ["", "## Settings", "", "```", *(f"{k} = {v}" for k, v in table["estimation"].items()), "```", ""]
+    lines += ["", "## Settings", "", "```", *(f"{k} = {'auto' if v is None else v}" for k, v in table["estimation"].items()), "```", ""]
     return "\n".join(lines)
 
 
