@@ -53,7 +53,6 @@ def test_both_trackers_keep_the_truth_and_imagesp_is_not_looser():
         for i, (truth, scan) in enumerate(zip(poses, scans)):
             result = tracker.step(previous, scan, 1.0)
             assert result.consistent and result.status == ("global" if i == 0 else "tracking")
-            assert result.elapsed_s > 0
             assert result.paving.contains(truth[None])[0], (kind, i)
             assert result.q <= 1
             previous = result.paving
