@@ -47,7 +47,7 @@ import numba
 import numpy as np
 
 from localization import motion_models as kernels
-from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle
+from localization.compiled_linalg import all_finite, kalman_gain_t, wrap_angle
 from localization.compiled_ukf import (
     NOT_FINITE,
     NOT_POSITIVE_DEFINITE,
@@ -156,24 +156,8 @@ def update_core(h, jac_h, mean, cov, z, args, r_cov, state_angles, angles, out_m
             innovation[a] = wrap_angle(innovation[a])
         point[:] = x
         jac_h(point, step_args, jac)
-        for i in range(n):  # C = P H^T
-            for c in range(m):
-                total = 0.0
-                for k in range(n):
-                    total += prior[i, k] * jac[c, k]
-                cross[i, c] = total
-        for c in range(m):  # S = H C + R
-            for d in range(m):
-                total = 0.0
-                for k in range(n):
-                    total += jac[c, k] * cross[k, d]
-                s_cov[c, d] = total + r[c, d]
-        if not cholesky_lower(s_cov, s_chol):
+        if not kalman_gain_t(prior, jac, r, cross, s_cov, s_chol, gain_t):  # K^T = S^-1 (P H^T)^T
             return NOT_POSITIVE_DEFINITE
-        for c in range(m):
-            for i in range(n):
-                gain_t[c, i] = cross[i, c]
-        cholesky_solve(s_chol, gain_t, gain_t)  # K^T = S^-1 C^T
         new_mean = out_mean[b]
         for i in range(n):  # x+ = x + K y
             total = 0.0

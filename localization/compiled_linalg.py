@@ -91,3 +91,42 @@ def all_finite(values) -> bool:
         if not math.isfinite(value):
             return False
     return True
+
+
+@numba.njit(cache=True)
+def gain_from_cross(s_cov, cross, s_chol, gain_t) -> bool:
+    """``gain_t (m, n) = S^-1 C^T`` (the transposed Kalman gain) from ``s_cov (m, m) = S`` and
+    ``cross (n, m) = C``, by a Cholesky factor ``s_chol`` of ``S``; ``False`` when ``S`` is not
+    positive definite."""
+    if not cholesky_lower(s_cov, s_chol):
+        return False
+    for c in range(s_cov.shape[0]):
+        for i in range(cross.shape[0]):
+            gain_t[c, i] = cross[i, c]
+    cholesky_solve(s_chol, gain_t, gain_t)
+    return True
+
+
+@numba.njit(cache=True)
+def kalman_gain_t(cov, jac, noise_cov, cross, s_cov, s_chol, gain_t) -> bool:
+    """The transposed Kalman gain of a linearised update, ``K^T = S^-1 (P H^T)^T``.
+
+    ``cov (n, n)`` the prior ``P``, ``jac (m, n)`` the measurement matrix ``H``, ``noise_cov
+    (m, m)`` ``R``. Writes ``cross (n, m) = P H^T``, ``s_cov (m, m) = S = H P H^T + R``, its
+    Cholesky factor ``s_chol`` and ``gain_t (m, n)``. Returns ``False`` (buffers then undefined
+    past ``s_cov``) when ``S`` is not positive definite.
+    """
+    n, m = cov.shape[0], jac.shape[0]
+    for i in range(n):  # P H^T
+        for c in range(m):
+            total = 0.0
+            for k in range(n):
+                total += cov[i, k] * jac[c, k]
+            cross[i, c] = total
+    for c in range(m):  # S = H (P H^T) + R
+        for d in range(m):
+            total = 0.0
+            for k in range(n):
+                total += jac[c, k] * cross[k, d]
+            s_cov[c, d] = total + noise_cov[c, d]
+    return gain_from_cross(s_cov, cross, s_chol, gain_t)

@@ -63,7 +63,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle, wrap_residual
+from localization.compiled_linalg import all_finite, cholesky_lower, gain_from_cross, wrap_angle, wrap_residual
 from localization.errors import EstimationError
 from localization import motion_models as kernels
 
@@ -266,15 +266,12 @@ def update_core(h, mean, cov, z, args, r_cov, weights, state_angles, angles, out
                 for k in range(n):
                     total += chol[i, k] * (dev[k, c] - dev[n + k, c])
                 cross[i, c] = scale * total
-        if not cholesky_lower(s_cov, s_chol):
+        if not gain_from_cross(s_cov, cross, s_chol, gain_t):  # K^T = S^-1 Pxz^T
             return NOT_POSITIVE_DEFINITE
         for c in range(m):
             innovation[c] = z[b, c] - z_pred[c]
-            for i in range(n):
-                gain_t[c, i] = cross[i, c]
         for a in angles:
             innovation[a] = wrap_angle(innovation[a])
-        cholesky_solve(s_chol, gain_t, gain_t)  # K^T = S^-1 Pxz^T
         new_mean = out_mean[b]
         for i in range(n):  # x+ = x- + K (z - z-)
             total = 0.0

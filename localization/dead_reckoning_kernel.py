@@ -36,7 +36,7 @@ import math
 import numba
 import numpy as np
 
-from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle, wrap_residual
+from localization.compiled_linalg import all_finite, cholesky_lower, kalman_gain_t, wrap_angle, wrap_residual
 
 X, Y, THETA, V, OMEGA, B_GYRO, B_ACCEL, D_WHEEL = range(8)
 N_STATES = 8
@@ -157,24 +157,8 @@ def _linear_update(mean, cov, z, r_cov, wheel_base_m, speed_correction,
     h[1, D_WHEEL] = -(mean[V] - speed_correction) / wheel_base_m
     h[2, OMEGA] = 1.0
     h[2, B_GYRO] = 1.0
-    for i in range(n):  # P H^T
-        for r in range(m):
-            total = 0.0
-            for j in range(n):
-                total += cov[i, j] * h[r, j]
-            cross[i, r] = total
-    for r in range(m):  # S = H P H^T + R
-        for c in range(m):
-            total = 0.0
-            for j in range(n):
-                total += h[r, j] * cross[j, c]
-            s_cov[r, c] = total + r_cov[r, c]
-    if not cholesky_lower(s_cov, s_chol):
+    if not kalman_gain_t(cov, h, r_cov, cross, s_cov, s_chol, gain_t):  # K^T = S^-1 (P H^T)^T
         return False
-    for r in range(m):
-        for i in range(n):
-            gain_t[r, i] = cross[i, r]
-    cholesky_solve(s_chol, gain_t, gain_t)  # K^T = S^-1 (P H^T)^T
     for r in range(m):  # z - H x-
         total = 0.0
         for j in range(n):

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from localization import linalg
-from localization.compiled_linalg import all_finite, cholesky_lower, cholesky_solve, wrap_angle, wrap_residual
+from localization.compiled_linalg import (
+    all_finite,
+    cholesky_lower,
+    cholesky_solve,
+    kalman_gain_t,
+    wrap_angle,
+    wrap_residual,
+)
 
 
 @pytest.mark.parametrize("n", [1, 3, 5, 8])
@@ -70,3 +77,21 @@ def test_all_finite():
     for bad in (np.nan, np.inf, -np.inf):
         values[2, 1] = bad
         assert not all_finite(values)
+
+
+@pytest.mark.parametrize(("n", "m"), [(5, 3), (8, 3), (4, 2)])
+def test_kalman_gain_matches_the_textbook_gain(n, m):
+    rng = np.random.default_rng(10 * n + m)
+    for _ in range(30):
+        root = rng.normal(size=(n, n))
+        cov = root @ root.T + 1e-2 * np.eye(n)
+        jac = rng.normal(size=(m, n))
+        noise = np.diag(rng.uniform(0.01, 1.0, m))
+        cross, s_cov, s_chol, gain_t = np.empty((n, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, n))
+        assert kalman_gain_t(cov, jac, noise, cross, s_cov, s_chol, gain_t)
+        expected = cov @ jac.T @ np.linalg.inv(jac @ cov @ jac.T + noise)
+        np.testing.assert_allclose(gain_t.T, expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(s_cov, jac @ cov @ jac.T + noise, rtol=1e-12)
+    # S not positive definite (a negative noise variance larger than H P H^T): refused
+    assert not kalman_gain_t(np.eye(2), np.eye(2), -2.0 * np.eye(2), np.empty((2, 2)), np.empty((2, 2)),
+                             np.empty((2, 2)), np.empty((2, 2)))
