@@ -11,7 +11,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +65,7 @@ def machine_line(*packages: str) -> str:
         except PackageNotFoundError:
             versions.append(f"{name} (not installed)")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    day = datetime.now(timezone.utc).strftime("%Y-%m-%d")
+    day = datetime.now(UTC).strftime("%Y-%m-%d")
     return (
         f"{_cpu_model()}, {os.cpu_count()} cores, load {load:.1f}, Python "
         f"{sys.version.split()[0]}, {', '.join(versions)}; measured {day}"
@@ -94,7 +94,9 @@ def write_section(title: str, body: str, path: Path = BENCHMARKS_MD) -> None:
     if start is None:
         new = text.rstrip("\n") + "\n\n" + section
     else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+        end = next(
+            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
+        )
         tail = "".join(lines[end:])
         new = "".join(lines[:start]) + section + ("\n" + tail if tail else "")
     write_text(path, new)

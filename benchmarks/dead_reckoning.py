@@ -24,6 +24,7 @@ import argparse
 import time
 
 import numpy as np
+from _common import best_seconds
 
 from localization.dead_reckoning import (
     DeadReckoning,
@@ -38,8 +39,6 @@ from robotsim.control import Route
 from robotsim.maps import builtin_map
 from robotsim.simulation import simulate
 
-from _common import best_seconds
-
 ROUTE = Route([[8.5, 1.0], [8.8, 4.0], [5.0, 4.3], [4.5, 7.0], [1.0, 7.0]], loop=True)
 START = (1.0, 1.0, 0.0)
 
@@ -52,8 +51,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--generic-steps", type=int, default=2_000)
     args = parser.parse_args(argv)
 
-    log = simulate(builtin_map("hall"), ROUTE, start_pose=START, duration_s=args.steps / 100.0,
-                   rng=np.random.default_rng(0))
+    log = simulate(
+        builtin_map("hall"),
+        ROUTE,
+        start_pose=START,
+        duration_s=args.steps / 100.0,
+        rng=np.random.default_rng(0),
+    )
     robot = NominalRobot(log.robot.wheel_radius_m, log.robot.wheel_base_m, log.robot.ticks_per_rev)
     started = time.perf_counter()
     data = odometry_data(log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, robot)
@@ -63,8 +67,15 @@ def main(argv: list[str] | None = None) -> int:
     truth = log.pose
 
     def clamp(index, belief):  # a 0.4 m box around the truth, once a second
-        box = np.array([[[truth[index, 0] - 0.2, truth[index, 0] + 0.2],
-                         [truth[index, 1] - 0.2, truth[index, 1] + 0.2], [-np.pi, np.pi]]])
+        box = np.array(
+            [
+                [
+                    [truth[index, 0] - 0.2, truth[index, 0] + 0.2],
+                    [truth[index, 1] - 0.2, truth[index, 1] + 0.2],
+                    [-np.pi, np.pi],
+                ]
+            ]
+        )
         return fuse(belief, box, rows=[1])[0]
 
     epochs = range(100, data.count, 100)
@@ -73,17 +84,25 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("ukf", "iukf", "ekf"):
         settings = DeadReckoningSettings(filter=name)
         plain = best_seconds(lambda: run_dead_reckoning(data, initial, settings), args.repeats)
-        fused = best_seconds(lambda: run_dead_reckoning(data, initial, settings, epochs, clamp), args.repeats)
+        fused = best_seconds(
+            lambda: run_dead_reckoning(data, initial, settings, epochs, clamp), args.repeats
+        )
         short = min(args.generic_steps, steps)
         generic = DeadReckoningSettings(filter=name, engine="generic")
-        generic_s = best_seconds(lambda: DeadReckoning(data, initial, generic).run(short), 1) / short * steps
+        generic_s = (
+            best_seconds(lambda: DeadReckoning(data, initial, generic).run(short), 1)
+            / short
+            * steps
+        )
         rows.append((name, plain, fused, generic_s))
 
     ticks = np.repeat(log.wheel_ticks[:, None, :], 2 * args.runs, axis=1)
     gyro = np.repeat(log.gyro_rad_s[:, None], 2 * args.runs, axis=1)
     accel = np.repeat(log.accel_m_s2[:, None, :], 2 * args.runs, axis=1)
     mc_steps = min(steps, 6_000)
-    mc_data = odometry_data(ticks[: mc_steps + 1], gyro[: mc_steps + 1], accel[: mc_steps + 1], 0.01, robot)
+    mc_data = odometry_data(
+        ticks[: mc_steps + 1], gyro[: mc_steps + 1], accel[: mc_steps + 1], 0.01, robot
+    )
     mc_initial = initial_belief(START, [0.01, 0.01, 0.01], batch=2 * args.runs)
     mc_s = best_seconds(lambda: run_dead_reckoning(mc_data, mc_initial), args.repeats)
 
@@ -91,14 +110,22 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|")
     print(f"| sensor arrays to filter inputs (`odometry_data`, vectorised) | {prepare_s:.3f} | | |")
     for name, plain, fused, generic_s in rows:
-        print(f"| compiled `{name}`, no fusion (1 call) | {plain:.3f} | {plain / steps * 1e6:.2f} | |")
-        print(f"| compiled `{name}`, clamp of row 1 once a second ({len(epochs) + 1} calls, `fuse` included) | {fused:.3f} "
-              f"| {fused / steps * 1e6:.2f} | |")
-        print(f"| generic `{name}` (C's filter objects), first {min(args.generic_steps, steps)} steps "
-              f"| {generic_s:.1f} (projected) | {generic_s / steps * 1e6:.0f} "
-              f"| generic / compiled {generic_s / plain:.0f}x |")
-    print(f"| compiled `ukf`, Monte Carlo {args.runs} runs x 2 branches, {mc_steps} steps | {mc_s:.3f} "
-          f"| {mc_s / mc_steps / (2 * args.runs) * 1e6:.2f} per run-step | |")
+        print(
+            f"| compiled `{name}`, no fusion (1 call) | {plain:.3f} | {plain / steps * 1e6:.2f} | |"
+        )
+        print(
+            f"| compiled `{name}`, clamp of row 1 once a second ({len(epochs) + 1} calls, `fuse` included) | {fused:.3f} "
+            f"| {fused / steps * 1e6:.2f} | |"
+        )
+        print(
+            f"| generic `{name}` (C's filter objects), first {min(args.generic_steps, steps)} steps "
+            f"| {generic_s:.1f} (projected) | {generic_s / steps * 1e6:.0f} "
+            f"| generic / compiled {generic_s / plain:.0f}x |"
+        )
+    print(
+        f"| compiled `ukf`, Monte Carlo {args.runs} runs x 2 branches, {mc_steps} steps | {mc_s:.3f} "
+        f"| {mc_s / mc_steps / (2 * args.runs) * 1e6:.2f} per run-step | |"
+    )
     return 0
 
 

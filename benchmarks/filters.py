@@ -84,17 +84,24 @@ def measure_pose_jacobian(x: np.ndarray) -> np.ndarray:
     return H_POSE if x.ndim == 1 else np.broadcast_to(H_POSE, x.shape[:-1] + (3, 5))
 
 
-def simulate(runs: int, steps: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def simulate(
+    runs: int, steps: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Truth ``(runs, steps, 5)``, measurements ``(runs, steps, 3)`` and initial means ``(runs, 5)``
     (the state before the first step plus a draw from ``P0``).
 
     Start near the origin heading close to +pi at 2 m/s, turning at 0.6-1.0 rad/s, so the
     heading crosses +-pi within the first second and then every 6-10 s.
     """
-    x = np.column_stack([
-        rng.normal(0.0, 1.0, runs), rng.normal(0.0, 1.0, runs), rng.uniform(2.9, 3.1, runs),
-        np.full(runs, 2.0), rng.uniform(0.6, 1.0, runs),
-    ])
+    x = np.column_stack(
+        [
+            rng.normal(0.0, 1.0, runs),
+            rng.normal(0.0, 1.0, runs),
+            rng.uniform(2.9, 3.1, runs),
+            np.full(runs, 2.0),
+            rng.uniform(0.6, 1.0, runs),
+        ]
+    )
     initial = x + rng.normal(size=(runs, 5)) * np.sqrt(np.diag(P0))
     initial[:, HEADING] = wrap_angle(initial[:, HEADING])
     q_sqrt, r_sqrt = np.sqrt(np.diag(Q)), np.sqrt(np.diag(R))
@@ -122,7 +129,9 @@ def our_models(compiled: bool = False) -> tuple[ProcessModel, MeasurementModel]:
     )
 
 
-def run_ours(filt, z: np.ndarray, initial: np.ndarray, compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def run_ours(
+    filt, z: np.ndarray, initial: np.ndarray, compiled: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Run ``filt`` over ``z (..., steps, 3)`` from ``initial (..., 5)`` (one run or a batch),
     with the models of :func:`our_models`.
 
@@ -174,10 +183,17 @@ class _CTRVExtendedKalmanFilter(FilterpyEKF):
 def filterpy_ukf(initial: np.ndarray) -> FilterpyUKF:
     """filterpy's UKF set up with our model, points, noise and angle handling."""
     ukf = FilterpyUKF(
-        dim_x=5, dim_z=3, dt=DT_S, hx=measure_pose, fx=ctrv_transition,
+        dim_x=5,
+        dim_z=3,
+        dt=DT_S,
+        hx=measure_pose,
+        fx=ctrv_transition,
         points=MerweScaledSigmaPoints(5, alpha=ALPHA, beta=BETA, kappa=KAPPA),
-        x_mean_fn=_centre_mean, z_mean_fn=_centre_mean,
-        residual_x=_residual, residual_z=_residual, state_add=_wrapped_add,
+        x_mean_fn=_centre_mean,
+        z_mean_fn=_centre_mean,
+        residual_x=_residual,
+        residual_z=_residual,
+        state_add=_wrapped_add,
     )
     ukf.x, ukf.P, ukf.Q, ukf.R = initial.copy(), P0.copy(), Q.copy(), R.copy()
     return ukf
@@ -220,16 +236,24 @@ def _difference(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarra
     return float(max(np.abs(dm).max(), np.abs(a[1] - b[1]).max()))
 
 
-LABELS = {"ukf": "UKF (compiled path)", "ukf numpy": "UKF (numpy path)", "ekf": "EKF (compiled path)",
-          "ekf numpy": "EKF (numpy path)"}
+LABELS = {
+    "ukf": "UKF (compiled path)",
+    "ukf numpy": "UKF (numpy path)",
+    "ekf": "EKF (compiled path)",
+    "ekf numpy": "EKF (numpy path)",
+}
 
 
 def ours() -> dict[str, tuple[object, bool, str]]:
     """Our filters by name: ``(filter, compiled models, filterpy's filter to compare with)``."""
     ukf = UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA))
     ekf = ExtendedKalmanFilter()
-    return {"ukf": (ukf, True, "ukf"), "ukf numpy": (ukf, False, "ukf"), "ekf": (ekf, True, "ekf"),
-            "ekf numpy": (ekf, False, "ekf")}
+    return {
+        "ukf": (ukf, True, "ukf"),
+        "ukf numpy": (ukf, False, "ukf"),
+        "ekf": (ekf, True, "ekf"),
+        "ekf numpy": (ekf, False, "ekf"),
+    }
 
 
 def check_equivalence(z: np.ndarray, initial: np.ndarray, runs: int) -> list[list[str]]:
@@ -241,44 +265,82 @@ def check_equivalence(z: np.ndarray, initial: np.ndarray, runs: int) -> list[lis
         vs_filterpy = vs_single = 0.0
         for r in range(runs):
             single = run_ours(filt, z[r], initial[r], compiled)
-            vs_filterpy = max(vs_filterpy, _difference(single, run_filterpy(theirs, z[r], initial[r])))
+            vs_filterpy = max(
+                vs_filterpy, _difference(single, run_filterpy(theirs, z[r], initial[r]))
+            )
             vs_single = max(vs_single, _difference(single, (batched[0][r], batched[1][r])))
-        rows.append([f"our {LABELS[name]} vs filterpy {theirs.upper()} ({runs} runs x {z.shape[1]} steps)",
-                     f"{vs_filterpy:.1e}", "ok" if vs_filterpy <= TOLERANCE else "FAIL"])
-        rows.append([f"our {LABELS[name]}: batch of {runs} vs one run at a time", f"{vs_single:.1e}",
-                     "ok" if vs_single <= TOLERANCE else "FAIL"])
+        rows.append(
+            [
+                f"our {LABELS[name]} vs filterpy {theirs.upper()} ({runs} runs x {z.shape[1]} steps)",
+                f"{vs_filterpy:.1e}",
+                "ok" if vs_filterpy <= TOLERANCE else "FAIL",
+            ]
+        )
+        rows.append(
+            [
+                f"our {LABELS[name]}: batch of {runs} vs one run at a time",
+                f"{vs_single:.1e}",
+                "ok" if vs_single <= TOLERANCE else "FAIL",
+            ]
+        )
     for kind in ("ukf", "ekf"):
         filt = filters[kind][0]
-        paths = max(_difference(run_ours(filt, z[r], initial[r], True), run_ours(filt, z[r], initial[r]))
-                    for r in range(runs))
-        rows.append([f"our {LABELS[kind]} vs our {LABELS[kind + ' numpy']}", f"{paths:.1e}",
-                     "ok" if paths <= TOLERANCE else "FAIL"])
-    floor = max(_difference(run_ours(filters["ukf numpy"][0], z[r], initial[r]), floor_ukf_run(z[r], initial[r]))
-                for r in range(runs))
-    rows.append(["our UKF (numpy path) vs its bare-numpy floor (`floor_ukf_run`)", f"{floor:.1e}",
-                 "ok" if floor <= TOLERANCE else "FAIL"])
+        paths = max(
+            _difference(run_ours(filt, z[r], initial[r], True), run_ours(filt, z[r], initial[r]))
+            for r in range(runs)
+        )
+        rows.append(
+            [
+                f"our {LABELS[kind]} vs our {LABELS[kind + ' numpy']}",
+                f"{paths:.1e}",
+                "ok" if paths <= TOLERANCE else "FAIL",
+            ]
+        )
+    floor = max(
+        _difference(
+            run_ours(filters["ukf numpy"][0], z[r], initial[r]), floor_ukf_run(z[r], initial[r])
+        )
+        for r in range(runs)
+    )
+    rows.append(
+        [
+            "our UKF (numpy path) vs its bare-numpy floor (`floor_ukf_run`)",
+            f"{floor:.1e}",
+            "ok" if floor <= TOLERANCE else "FAIL",
+        ]
+    )
     return rows
 
 
 # --------------------------------------------------------------------------------- timing
 
 
-def time_all(z: np.ndarray, initial: np.ndarray, filterpy_runs: int, repeats: int) -> dict[str, float]:
+def time_all(
+    z: np.ndarray, initial: np.ndarray, filterpy_runs: int, repeats: int
+) -> dict[str, float]:
     """Microseconds per step (one filter) and per run-step (batched / looped), best of ``repeats``."""
     steps = z.shape[1]
     one, all_runs = steps * 1e-6, steps * z.shape[0] * 1e-6  # seconds -> us per (run-)step
     us = {}
     for name, (filt, compiled, _) in ours().items():
-        us[f"ours {name} single"] = best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled), repeats) / one
-        us[f"ours {name} batched"] = best_seconds(lambda: run_ours(filt, z, initial, compiled), repeats) / all_runs
+        us[f"ours {name} single"] = (
+            best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled), repeats) / one
+        )
+        us[f"ours {name} batched"] = (
+            best_seconds(lambda: run_ours(filt, z, initial, compiled), repeats) / all_runs
+        )
     for kind in ("ukf", "ekf"):
-        us[f"filterpy {kind} single"] = best_seconds(lambda: run_filterpy(kind, z[0], initial[0]), repeats) / one
+        us[f"filterpy {kind} single"] = (
+            best_seconds(lambda: run_filterpy(kind, z[0], initial[0]), repeats) / one
+        )
 
         def looped():
             for r in range(filterpy_runs):
                 run_filterpy(kind, z[r], initial[r])
 
-        us[f"filterpy {kind} looped"] = best_seconds(looped, repeats) / (steps * filterpy_runs) * 1e6
+        us[f"filterpy {kind} looped"] = (
+            best_seconds(looped, repeats) / (steps * filterpy_runs) * 1e6
+        )
     return us
 
 
@@ -360,7 +422,9 @@ def decompose_ukf_step(z: np.ndarray, initial: np.ndarray, repeats: int) -> list
 
     points = np.tile(initial[0], (11, 1))
     full = best_seconds(lambda: run_ours(filt, z[0], initial[0]), repeats) / steps * 1e6
-    compiled = best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled=True), repeats) / steps * 1e6
+    compiled = (
+        best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled=True), repeats) / steps * 1e6
+    )
     filter_only = best_seconds(free_run, repeats) / steps * 1e6
     floor = best_seconds(lambda: floor_ukf_run(z[0], initial[0]), repeats) / steps * 1e6
     ctrv_11 = us(lambda: ctrv_transition(points, DT_S), 200)
@@ -372,76 +436,130 @@ def decompose_ukf_step(z: np.ndarray, initial: np.ndarray, repeats: int) -> list
         ["our UKF step (predict + update), CTRV, numpy path", f"{full:.0f}"],
         ["the same step with a free model (the filter's own share)", f"{filter_only:.0f}"],
         ["CTRV transition of the 11 sigma points, one call (the model's share)", f"{ctrv_11:.0f}"],
-        ["the same step as bare numpy/LAPACK calls (`floor_ukf_run`: the floor of numpy)", f"{floor:.0f}"],
+        [
+            "the same step as bare numpy/LAPACK calls (`floor_ukf_run`: the floor of numpy)",
+            f"{floor:.0f}",
+        ],
         ["one numpy ufunc call on 5x5 (`P + P`)", f"{add:.2f}"],
-        ["filterpy's UKF step calls `ctrv_transition` on one state 11 times: 11 x", f"{11 * ctrv_1:.0f}"],
-        ["either EKF step: `ctrv_jacobian` + `ctrv_transition` on one state", f"{jacobian_1 + ctrv_1:.0f}"],
+        [
+            "filterpy's UKF step calls `ctrv_transition` on one state 11 times: 11 x",
+            f"{11 * ctrv_1:.0f}",
+        ],
+        [
+            "either EKF step: `ctrv_jacobian` + `ctrv_transition` on one state",
+            f"{jacobian_1 + ctrv_1:.0f}",
+        ],
     ]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=200, help="time steps per run (default: %(default)s)")
-    parser.add_argument("--runs", type=int, default=1000, help="runs of our batched filter (default: %(default)s)")
-    parser.add_argument("--filterpy-runs", type=int, default=10,
-                        help="runs filterpy is looped over, also the runs checked (default: %(default)s)")
-    parser.add_argument("--repeats", type=int, default=3, help="timing rounds, best kept (default: %(default)s)")
+    parser.add_argument(
+        "--steps", type=int, default=200, help="time steps per run (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--runs", type=int, default=1000, help="runs of our batched filter (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--filterpy-runs",
+        type=int,
+        default=10,
+        help="runs filterpy is looped over, also the runs checked (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="timing rounds, best kept (default: %(default)s)"
+    )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--profile", action="store_true", help="print a cProfile of our one-filter UKF")
+    parser.add_argument(
+        "--profile", action="store_true", help="print a cProfile of our one-filter UKF"
+    )
     parser.add_argument("--write", action="store_true", help="update this section of BENCHMARKS.md")
     args = parser.parse_args(argv)
-    if min(args.steps, args.runs, args.filterpy_runs, args.repeats) < 1 or args.filterpy_runs > args.runs:
-        parser.error("--steps, --runs, --filterpy-runs and --repeats must be >= 1, --filterpy-runs <= --runs")
+    if (
+        min(args.steps, args.runs, args.filterpy_runs, args.repeats) < 1
+        or args.filterpy_runs > args.runs
+    ):
+        parser.error(
+            "--steps, --runs, --filterpy-runs and --repeats must be >= 1, --filterpy-runs <= --runs"
+        )
 
     _, z, initial = simulate(args.runs, args.steps, np.random.default_rng(args.seed))
     checks = check_equivalence(z, initial, args.filterpy_runs)
     print(markdown_table(["equivalence check", "largest difference", "verdict"], checks))
     if any(row[2] != "ok" for row in checks):
-        print(f"FAILED: our estimates differ from the reference by more than {TOLERANCE:g}", file=sys.stderr)
+        print(
+            f"FAILED: our estimates differ from the reference by more than {TOLERANCE:g}",
+            file=sys.stderr,
+        )
         return 1
 
     us = time_all(z, initial, args.filterpy_runs, args.repeats)
     rows = []
-    for kind, target_single, target_batch in (("ukf", 8.0, 50.0), ("ukf numpy", None, None), ("ekf", None, None),
-                                              ("ekf numpy", None, None)):
+    for kind, target_single, target_batch in (
+        ("ukf", 8.0, 50.0),
+        ("ukf numpy", None, None),
+        ("ekf", None, None),
+        ("ekf numpy", None, None),
+    ):
         name = LABELS[kind]
         theirs_kind = ours()[kind][2]
         single, theirs = us[f"ours {kind} single"], us[f"filterpy {theirs_kind} single"]
         batched, looped = us[f"ours {kind} batched"], us[f"filterpy {theirs_kind} looped"]
         for label, mine, ref, target in (
             (f"{name}, one filter (us per step)", single, theirs, target_single),
-            (f"{name}, {args.runs} runs batched vs filterpy looped (us per run-step)", batched, looped, target_batch),
+            (
+                f"{name}, {args.runs} runs batched vs filterpy looped (us per run-step)",
+                batched,
+                looped,
+                target_batch,
+            ),
         ):
             ratio = ref / mine
             verdict = "" if target is None else ("met" if ratio >= target else "MISSED")
-            rows.append([label, f"{mine:.2f}", f"{ref:.1f}", f"{ratio:.1f}x",
-                         "" if target is None else f">= {target:g}x", verdict])
+            rows.append(
+                [
+                    label,
+                    f"{mine:.2f}",
+                    f"{ref:.1f}",
+                    f"{ratio:.1f}x",
+                    "" if target is None else f">= {target:g}x",
+                    verdict,
+                ]
+            )
     table = markdown_table(["figure", "ours (us)", "filterpy (us)", "ratio", "target", ""], rows)
     print()
     print(table)
     per_second = 1e6 / us["ours ukf batched"]
-    print(f"\nour batched UKF: {per_second:,.0f} run-steps per second; filterpy looped: "
-          f"{1e6 / us['filterpy ukf looped']:,.0f}")
-    parts = markdown_table(["where the one-filter steps go", "us"], decompose_ukf_step(z, initial, args.repeats))
+    print(
+        f"\nour batched UKF: {per_second:,.0f} run-steps per second; filterpy looped: "
+        f"{1e6 / us['filterpy ukf looped']:,.0f}"
+    )
+    parts = markdown_table(
+        ["where the one-filter steps go", "us"], decompose_ukf_step(z, initial, args.repeats)
+    )
     print()
     print(parts)
     if args.profile:
         print(profile_ours(z, initial))
     if args.write:
-        command = (f"python benchmarks/filters.py --steps {args.steps} --runs {args.runs} "
-                   f"--filterpy-runs {args.filterpy_runs} --repeats {args.repeats} --seed {args.seed}")
-        body = "\n\n".join([
-            f"Machine: {machine_line('filterpy')}.",
-            f"```sh\n{command}\n```",
-            "Same CTRV model, data, noise, sigma points (alpha 0.1, beta 2, kappa 0) and heading "
-            "handling in both libraries (see the script's docstring). Equivalence, checked before timing "
-            f"(the script exits 1 above {TOLERANCE:g}):",
-            markdown_table(["equivalence check", "largest difference", "verdict"], checks),
-            f"Speed, best of {args.repeats} (our batched UKF: {per_second:,.0f} run-steps per second):",
-            table,
-            parts,
-            ANALYSIS,
-        ])
+        command = (
+            f"python benchmarks/filters.py --steps {args.steps} --runs {args.runs} "
+            f"--filterpy-runs {args.filterpy_runs} --repeats {args.repeats} --seed {args.seed}"
+        )
+        body = "\n\n".join(
+            [
+                f"Machine: {machine_line('filterpy')}.",
+                f"```sh\n{command}\n```",
+                "Same CTRV model, data, noise, sigma points (alpha 0.1, beta 2, kappa 0) and heading "
+                "handling in both libraries (see the script's docstring). Equivalence, checked before timing "
+                f"(the script exits 1 above {TOLERANCE:g}):",
+                markdown_table(["equivalence check", "largest difference", "verdict"], checks),
+                f"Speed, best of {args.repeats} (our batched UKF: {per_second:,.0f} run-steps per second):",
+                table,
+                parts,
+                ANALYSIS,
+            ]
+        )
         write_section(SECTION, body)
     return 0
 

@@ -50,12 +50,18 @@ def _random_poses(segment_map, count: int, rng: np.random.Generator) -> np.ndarr
 
 
 def _scan(segment_map, params, belt, truth, rng) -> SonarScan:
-    d = cone_distances(truth, segment_map.segments, params.mount_xy, params.mount_angle_rad,
-                       params.half_aperture_rad)
+    d = cone_distances(
+        truth,
+        segment_map.segments,
+        params.mount_xy,
+        params.mount_angle_rad,
+        params.half_aperture_rad,
+    )
     bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
     m = np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0.0)
-    return SonarScan(segment_map.segments, belt, np.where(d > params.d_max_m, np.inf, m),
-                     segment_map.boundary)
+    return SonarScan(
+        segment_map.segments, belt, np.where(d > params.d_max_m, np.inf, m), segment_map.boundary
+    )
 
 
 def _step_both(trackers, previous, scan, dt_s, repeat):
@@ -64,15 +70,17 @@ def _step_both(trackers, previous, scan, dt_s, repeat):
     results, best = {}, {}
     for engine in ENGINES:
         results[engine], best[engine] = _best_of(
-            lambda e=engine: trackers[e].step(previous[e], scan, dt_s), repeat)
+            lambda e=engine: trackers[e].step(previous[e], scan, dt_s), repeat
+        )
     return results, best
 
 
 def _same_sets(results) -> bool:
     """Every engine returned the same status and the same boxes."""
     first = results[ENGINES[0]]
-    return all(r.status == first.status and np.array_equal(r.outer, first.outer)
-               for r in results.values())
+    return all(
+        r.status == first.status and np.array_equal(r.outer, first.outer) for r in results.values()
+    )
 
 
 def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str]:
@@ -85,10 +93,16 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
     scans = [_scan(hall, params, belt, p, rng) for p in poses]
     rows = []
     for kind in ("sivia", "imagesp"):
-        trackers = {engine: IntervalTracker(TrackerSettings(
-            v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind, engine=engine),
-            hall.bounds) for engine in ENGINES}
-        previous = {engine: None for engine in ENGINES}
+        trackers = {
+            engine: IntervalTracker(
+                TrackerSettings(
+                    v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind, engine=engine
+                ),
+                hall.bounds,
+            )
+            for engine in ENGINES
+        }
+        previous = dict.fromkeys(ENGINES)
         times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
         for truth, scan in zip(poses, scans):
             results, best = _step_both(trackers, previous, scan, 1.0, repeat)
@@ -101,8 +115,9 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
             kept += int(result.consistent and result.paving.contains(truth[None])[0])
             differ += int(not _same_sets(results))
             previous = {e: r.paving for e, r in results.items()}
-        rows.append(_row(f"{kind} tracker epoch (circuit, limits 0.5 m/s, 0.5 rad/s)", times,
-                         boxes, areas))
+        rows.append(
+            _row(f"{kind} tracker epoch (circuit, limits 0.5 m/s, 0.5 rad/s)", times, boxes, areas)
+        )
         if kept != epochs:
             rows.append(f"| FAILED: {kind} kept the truth in {kept} of {epochs} epochs |")
         if differ:
@@ -120,15 +135,18 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
     settings = tracker_settings(spec)
-    trackers = {engine: IntervalTracker(dataclasses.replace(settings, engine=engine),
-                                        spec.map.bounds) for engine in ENGINES}
+    trackers = {
+        engine: IntervalTracker(dataclasses.replace(settings, engine=engine), spec.map.bounds)
+        for engine in ENGINES
+    }
     scans = np.arange(0, len(log.sonar_t_s), est.scan_stride(spec.sensors.sonar.rate_hz))
-    previous, last_t = {engine: None for engine in ENGINES}, log.sonar_t_s[scans[0]]
+    previous, last_t = dict.fromkeys(ENGINES), log.sonar_t_s[scans[0]]
     times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
     for index in scans:
         scan = SonarScan(spec.map.segments, belt, log.sonar_range_m[index], spec.map.boundary)
-        results, best = _step_both(trackers, previous, scan,
-                                   float(log.sonar_t_s[index] - last_t), repeat)
+        results, best = _step_both(
+            trackers, previous, scan, float(log.sonar_t_s[index] - last_t), repeat
+        )
         result = results["compiled"]
         previous, last_t = {e: r.paving for e, r in results.items()}, log.sonar_t_s[index]
         for engine in ENGINES:
@@ -138,8 +156,15 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
             boxes.append(result.paving.outer.shape[0])
             areas.append(result.paving.area_xy())
             kept += int(result.paving.contains(log.sonar_pose[index][None])[0])
-    rows = [_row(f"sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {est.q_max}, "
-                 "guaranteed; all epochs)", times, boxes, areas)]
+    rows = [
+        _row(
+            f"sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {est.q_max}, "
+            "guaranteed; all epochs)",
+            times,
+            boxes,
+            areas,
+        )
+    ]
     if kept != len(scans):
         rows.append(f"| FAILED: pipeline tracker kept the truth in {kept} of {len(scans)} epochs |")
     if differ:
@@ -162,10 +187,12 @@ def _row(label: str, times: dict, boxes: list, areas: list) -> str:
     the compiled engine, the median set size and (x, y) area."""
     t = {e: np.array(v) * 1e3 for e, v in times.items()}
     speedup = np.median(t["numpy"] / t["compiled"])
-    return (f"| {label} | {len(t['compiled'])} | {np.median(t['numpy']):.1f} | "
-            f"{np.percentile(t['numpy'], 95):.1f} | {np.median(t['compiled']):.1f} | "
-            f"{np.percentile(t['compiled'], 95):.1f} | {speedup:.1f}x | {np.median(boxes):.0f} | "
-            f"{np.median(areas):.4f} |")
+    return (
+        f"| {label} | {len(t['compiled'])} | {np.median(t['numpy']):.1f} | "
+        f"{np.percentile(t['numpy'], 95):.1f} | {np.median(t['compiled']):.1f} | "
+        f"{np.percentile(t['compiled'], 95):.1f} | {speedup:.1f}x | {np.median(boxes):.0f} | "
+        f"{np.median(areas):.4f} |"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -204,7 +231,8 @@ def main(argv: list[str] | None = None) -> int:
             pavings = {}
             for engine in ENGINES:  # interleaved: both engines on each scan in turn
                 pavings[engine], best = _best_of(
-                    lambda e=engine: localize(scan, prior, eps, engine=e), args.repeat)
+                    lambda e=engine: localize(scan, prior, eps, engine=e), args.repeat
+                )
                 times[engine].append(best)
             paving = pavings["compiled"]
             differ += int(not np.array_equal(paving.outer, pavings["numpy"].outer))
@@ -218,9 +246,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.pipeline_s > 0:
         rows += _pipeline_rows(args.pipeline_s, args.repeat)
     lost += sum("FAILED" in row for row in rows)
-    print("| case (hall, eps 0.05 m, 16 sonars) | runs | numpy median ms | numpy p95 ms "
-          "| compiled median ms | compiled p95 ms | speed-up (median) | median boxes "
-          "| median (x, y) area m^2 |")
+    print(
+        "| case (hall, eps 0.05 m, 16 sonars) | runs | numpy median ms | numpy p95 ms "
+        "| compiled median ms | compiled p95 ms | speed-up (median) | median boxes "
+        "| median (x, y) area m^2 |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     if lost:

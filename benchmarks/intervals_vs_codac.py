@@ -129,7 +129,9 @@ def range_test(ranges_m: np.ndarray):
     lx, ly = ia.interval(LANDMARKS_M[:, 0]), ia.interval(LANDMARKS_M[:, 1])
 
     def test(boxes: np.ndarray) -> np.ndarray:
-        dist = ia.sqrt(ia.add(ia.sqr(ia.sub(boxes[:, None, 0], lx)), ia.sqr(ia.sub(boxes[:, None, 1], ly))))
+        dist = ia.sqrt(
+            ia.add(ia.sqr(ia.sub(boxes[:, None, 0], lx)), ia.sqr(ia.sub(boxes[:, None, 1], ly)))
+        )
         out = np.any((dist[..., 1] < ranges_m[:, 0]) | (dist[..., 0] > ranges_m[:, 1]), axis=1)
         inside = np.all((dist[..., 0] >= ranges_m[:, 0]) & (dist[..., 1] <= ranges_m[:, 1]), axis=1)
         return np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
@@ -140,9 +142,13 @@ def range_test(ranges_m: np.ndarray):
 def codac_range_function() -> codac.AnalyticFunction:
     """The four distances ``(2,) -> (4,)`` as a codac function."""
     p = codac.VectorVar(2)
-    return codac.AnalyticFunction([p], [
-        codac.sqrt(codac.sqr(p[0] - float(lx)) + codac.sqr(p[1] - float(ly))) for lx, ly in LANDMARKS_M
-    ])
+    return codac.AnalyticFunction(
+        [p],
+        [
+            codac.sqrt(codac.sqr(p[0] - float(lx)) + codac.sqr(p[1] - float(ly)))
+            for lx, ly in LANDMARKS_M
+        ],
+    )
 
 
 # ------------------------------------------------------------------- (b) rays in the hall
@@ -171,8 +177,9 @@ def ray_distance_function(segments: np.ndarray, params) -> codac.AnalyticFunctio
 
 def ray_params() -> SonarBeltParams:
     """The default belt as (nearly) a ray sensor with an unbounded range (see the docstring)."""
-    return dataclasses.replace(SonarBeltParams.default_belt(), half_aperture_rad=RAY_HALF_APERTURE_RAD,
-                               d_max_m=RAY_D_MAX_M)
+    return dataclasses.replace(
+        SonarBeltParams.default_belt(), half_aperture_rad=RAY_HALF_APERTURE_RAD, d_max_m=RAY_D_MAX_M
+    )
 
 
 def random_poses(segment_map, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -187,10 +194,14 @@ def random_poses(segment_map, count: int, rng: np.random.Generator) -> np.ndarra
     return np.array(poses)
 
 
-def ray_readings(segments: np.ndarray, params, truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def ray_readings(
+    segments: np.ndarray, params, truth: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
     """Readings ``(k,)``: true distances plus errors within 90 % of the bound (the 10 % margin
     covers the 1e-6 rad difference between our thin cone and codac's ray)."""
-    d = cone_distances(truth, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad)
+    d = cone_distances(
+        truth, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad
+    )
     bound = params.error_abs_bound_m + params.error_rel_bound * d
     return d + rng.uniform(-0.9, 0.9, d.shape) * bound
 
@@ -229,8 +240,13 @@ def theirs(run, repeats: int) -> Outcome:
     return Outcome(seconds, codac_outer(paving))
 
 
-def cross_check(mine: Outcome, codac_sivia: Outcome, f: codac.AnalyticFunction, y: codac.IntervalVector,
-                scan: SonarScan) -> np.ndarray:
+def cross_check(
+    mine: Outcome,
+    codac_sivia: Outcome,
+    f: codac.AnalyticFunction,
+    y: codac.IntervalVector,
+    scan: SonarScan,
+) -> np.ndarray:
     """Each side's box test on the other's outer boxes (boxes of the same size, so a rejection
     shows a tighter test, not a finer bisection). Returns counts ``(4,)``: our boxes codac's
     test rejects because some ray certainly meets a wall nearer than the reading, or only
@@ -246,7 +262,11 @@ def cross_check(mine: Outcome, codac_sivia: Outcome, f: codac.AnalyticFunction, 
     if codac_sivia.boxes:
         reject, _ = sensor_verdicts(codac_sivia.outer, scan, inner=False)
         ours_rejects = int(np.count_nonzero(reject.any(axis=1)))
-        ray_rejects = int(np.count_nonzero(rays.joint_rejections(codac_sivia.outer, scan, 0, rays.DEFAULT_PIECES, reject)))
+        ray_rejects = int(
+            np.count_nonzero(
+                rays.joint_rejections(codac_sivia.outer, scan, 0, rays.DEFAULT_PIECES, reject)
+            )
+        )
     return np.array([nearer, farther, ours_rejects, ray_rejects, mine.boxes])
 
 
@@ -264,25 +284,44 @@ def run_case_a(count: int, repeats: int, rng: np.random.Generator) -> list[dict]
     results = []
     for truth, ranges in landmark_instances(count, rng):
         y = codac.IntervalVector([[float(lo), float(hi)] for lo, hi in ranges])
-        results.append({
-            "truth": truth,
-            "ours": ours(lambda: sivia(range_test(ranges), LANDMARK_BOX, LANDMARK_EPS_M,
-                                       splits_per_level=SPLITS_PER_LEVEL), repeats),
-            "codac sivia": theirs(lambda: codac.sivia(x0, f, y, LANDMARK_EPS_M), repeats),
-            "codac pave": theirs(lambda: codac.pave(x0, codac.SepInverse(f, y), LANDMARK_EPS_M), repeats),
-        })
+        results.append(
+            {
+                "truth": truth,
+                "ours": ours(
+                    lambda: sivia(
+                        range_test(ranges),
+                        LANDMARK_BOX,
+                        LANDMARK_EPS_M,
+                        splits_per_level=SPLITS_PER_LEVEL,
+                    ),
+                    repeats,
+                ),
+                "codac sivia": theirs(lambda: codac.sivia(x0, f, y, LANDMARK_EPS_M), repeats),
+                "codac pave": theirs(
+                    lambda: codac.pave(x0, codac.SepInverse(f, y), LANDMARK_EPS_M), repeats
+                ),
+            }
+        )
     return results
 
 
-def run_case_b(kind: str, count: int, eps: float, repeats: int, rng: np.random.Generator,
-               f: codac.AnalyticFunction) -> list[dict]:
+def run_case_b(
+    kind: str,
+    count: int,
+    eps: float,
+    repeats: int,
+    rng: np.random.Generator,
+    f: codac.AnalyticFunction,
+) -> list[dict]:
     hall = builtin_map("hall")
     params = ray_params()
     belt = SonarBelt.from_params(params, echoes_never_lost=True)
     b = hall.bounds
     results = []
     for truth in random_poses(hall, count, rng):
-        scan = SonarScan(hall.segments, belt, ray_readings(hall.segments, params, truth, rng), boundary=None)
+        scan = SonarScan(
+            hall.segments, belt, ray_readings(hall.segments, params, truth, rng), boundary=None
+        )
         if kind == "tracking":
             centre = truth + rng.uniform(-1.0, 1.0, 3) * np.array([0.25, 0.25, 0.1])
             prior = np.stack([centre - TRACKING_HALF, centre + TRACKING_HALF], axis=-1)
@@ -291,14 +330,34 @@ def run_case_b(kind: str, count: int, eps: float, repeats: int, rng: np.random.G
         x0, y = to_codac_box(prior), to_codac_box(scan.ranges)
         result = {
             "truth": truth,
-            "ours": ours(lambda: localize(scan, prior, eps, heading_scale_m_per_rad=1.0,
-                                          splits_per_level=SPLITS_PER_LEVEL, ray_test=False), repeats),
+            "ours": ours(
+                lambda: localize(
+                    scan,
+                    prior,
+                    eps,
+                    heading_scale_m_per_rad=1.0,
+                    splits_per_level=SPLITS_PER_LEVEL,
+                    ray_test=False,
+                ),
+                repeats,
+            ),
             "codac sivia": theirs(lambda: codac.sivia(x0, f, y, eps), 1),
             "codac pave": theirs(lambda: codac.pave(x0, codac.SepInverse(f, y), eps), 1),
-            "ours + ray test": ours(lambda: localize(scan, prior, eps, heading_scale_m_per_rad=1.0,
-                                                     splits_per_level=SPLITS_PER_LEVEL, ray_test=True), repeats),
+            "ours + ray test": ours(
+                lambda: localize(
+                    scan,
+                    prior,
+                    eps,
+                    heading_scale_m_per_rad=1.0,
+                    splits_per_level=SPLITS_PER_LEVEL,
+                    ray_test=True,
+                ),
+                repeats,
+            ),
         }
-        result["cross"] = cross_check(result["ours"], result["codac sivia"], f, y, scan.restricted_to(prior))
+        result["cross"] = cross_check(
+            result["ours"], result["codac sivia"], f, y, scan.restricted_to(prior)
+        )
         results.append(result)
     return results
 
@@ -317,37 +376,76 @@ def run_belt_case(count: int, repeats: int, rng: np.random.Generator) -> list[li
         alone, with_rays = [], []
         for truth in truths:
             d = cone_distances(truth, hall.segments, params.mount_xy, params.mount_angle_rad, gamma)
-            bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
-            readings = np.where(d > params.d_max_m, np.inf, np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0))
+            bound = params.error_abs_bound_m + params.error_rel_bound * np.where(
+                np.isfinite(d), d, 0.0
+            )
+            readings = np.where(
+                d > params.d_max_m, np.inf, np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0)
+            )
             scan = SonarScan(hall.segments, belt, readings)
             centre = truth + rng.uniform(-1.0, 1.0, 3) * np.array([0.25, 0.25, 0.1])
             prior = np.stack([centre - TRACKING_HALF, centre + TRACKING_HALF], axis=-1)
-            alone.append(ours(lambda: localize(scan, prior, BELT_EPS, heading_scale_m_per_rad=1.0,
-                                               splits_per_level=SPLITS_PER_LEVEL, ray_test=False), repeats))
-            with_rays.append(ours(lambda: localize(scan, prior, BELT_EPS, heading_scale_m_per_rad=1.0,
-                                                   splits_per_level=SPLITS_PER_LEVEL, ray_test=True), repeats))
+            alone.append(
+                ours(
+                    lambda: localize(
+                        scan,
+                        prior,
+                        BELT_EPS,
+                        heading_scale_m_per_rad=1.0,
+                        splits_per_level=SPLITS_PER_LEVEL,
+                        ray_test=False,
+                    ),
+                    repeats,
+                )
+            )
+            with_rays.append(
+                ours(
+                    lambda: localize(
+                        scan,
+                        prior,
+                        BELT_EPS,
+                        heading_scale_m_per_rad=1.0,
+                        splits_per_level=SPLITS_PER_LEVEL,
+                        ray_test=True,
+                    ),
+                    repeats,
+                )
+            )
             if not (alone[-1].keeps(truth) and with_rays[-1].keeps(truth)):
                 raise SystemExit("FAILED: a set lost the truth (real belt)")
         ratio = np.median([b.volume / a.volume for a, b in zip(alone, with_rays)])
         smaller = sum(b.volume < a.volume for a, b in zip(alone, with_rays))
-        rows.append([
-            f"{gamma:.3g} rad ({np.degrees(gamma):.1f} deg)", str(count),
-            f"{np.median([o.seconds for o in alone]) * 1e3:.1f}", f"{np.median([o.seconds for o in with_rays]) * 1e3:.1f}",
-            f"{np.median([o.volume for o in alone]):.3g}", f"{np.median([o.volume for o in with_rays]):.3g}",
-            f"{ratio:.2f}", f"{smaller} / {count}",
-        ])
+        rows.append(
+            [
+                f"{gamma:.3g} rad ({np.degrees(gamma):.1f} deg)",
+                str(count),
+                f"{np.median([o.seconds for o in alone]) * 1e3:.1f}",
+                f"{np.median([o.seconds for o in with_rays]) * 1e3:.1f}",
+                f"{np.median([o.volume for o in alone]):.3g}",
+                f"{np.median([o.volume for o in with_rays]):.3g}",
+                f"{ratio:.2f}",
+                f"{smaller} / {count}",
+            ]
+        )
     return rows
 
 
 BELT_HEADER = [
-    "belt half-aperture", "epochs", "ours ms", "ours + ray test ms", "ours outer volume",
-    "ours + ray test outer volume", "volume ratio (with / without)", "epochs where smaller",
+    "belt half-aperture",
+    "epochs",
+    "ours ms",
+    "ours + ray test ms",
+    "ours outer volume",
+    "ours + ray test outer volume",
+    "volume ratio (with / without)",
+    "epochs where smaller",
 ]
 
 
 def summarise(label: str, results: list[dict]) -> tuple[list[str], bool]:
     """A table row (medians over the instances, with the target's verdict) and whether every
     set kept the truth."""
+
     def med(solver: str, field: str) -> float:
         return float(np.median([getattr(r[solver], field) for r in results]))
 
@@ -356,19 +454,35 @@ def summarise(label: str, results: list[dict]) -> tuple[list[str], bool]:
     kept = all(r[solver].keeps(r["truth"]) for r in results for solver in SOLVERS if solver in r)
     met = time_ratio >= 3.0 and volume_ratio <= 1.25
     row = [
-        label, str(len(results)),
-        f"{med('ours', 'seconds') * 1e3:.1f}", f"{med('codac sivia', 'seconds') * 1e3:.1f}",
-        f"{med('codac pave', 'seconds') * 1e3:.1f}", f"{time_ratio:.1f}x",
-        f"{med('ours', 'volume'):.3g}", f"{med('codac sivia', 'volume'):.3g}", f"{med('codac pave', 'volume'):.3g}",
-        f"{volume_ratio:.2f}", f"{med('ours', 'boxes'):.0f} / {med('codac sivia', 'boxes'):.0f}",
-        "met" if met else "MISSED", "yes" if kept else "NO",
+        label,
+        str(len(results)),
+        f"{med('ours', 'seconds') * 1e3:.1f}",
+        f"{med('codac sivia', 'seconds') * 1e3:.1f}",
+        f"{med('codac pave', 'seconds') * 1e3:.1f}",
+        f"{time_ratio:.1f}x",
+        f"{med('ours', 'volume'):.3g}",
+        f"{med('codac sivia', 'volume'):.3g}",
+        f"{med('codac pave', 'volume'):.3g}",
+        f"{volume_ratio:.2f}",
+        f"{med('ours', 'boxes'):.0f} / {med('codac sivia', 'boxes'):.0f}",
+        "met" if met else "MISSED",
+        "yes" if kept else "NO",
     ]
     if "ours + ray test" in results[0]:
-        ray_volume = float(np.median([r["ours + ray test"].volume / r["codac sivia"].volume for r in results]))
-        ray_time = float(np.median([r["codac sivia"].seconds / r["ours + ray test"].seconds for r in results]))
+        ray_volume = float(
+            np.median([r["ours + ray test"].volume / r["codac sivia"].volume for r in results])
+        )
+        ray_time = float(
+            np.median([r["codac sivia"].seconds / r["ours + ray test"].seconds for r in results])
+        )
         ray_met = ray_time >= 3.0 and ray_volume <= 1.25
-        row += [f"{med('ours + ray test', 'seconds') * 1e3:.1f}", f"{ray_time:.0f}x", f"{ray_volume:.2f}",
-                f"{med('ours + ray test', 'boxes'):.0f}", "met" if ray_met else "MISSED"]
+        row += [
+            f"{med('ours + ray test', 'seconds') * 1e3:.1f}",
+            f"{ray_time:.0f}x",
+            f"{ray_volume:.2f}",
+            f"{med('ours + ray test', 'boxes'):.0f}",
+            "met" if ray_met else "MISSED",
+        ]
     else:
         row += ["-"] * 5
     return row, kept
@@ -376,14 +490,32 @@ def summarise(label: str, results: list[dict]) -> tuple[list[str], bool]:
 
 SOLVERS = ("ours", "codac sivia", "codac pave", "ours + ray test")
 HEADER = [
-    "case", "runs", "ours ms", "codac sivia ms", "codac pave ms", "time ratio codac sivia / ours",
-    "ours outer volume", "codac sivia outer volume", "codac pave outer volume",
-    "volume ratio ours / codac sivia", "boxes ours / codac sivia", "target", "truth in every set",
-    "ours + ray test (intervals.rays) ms", "its time ratio", "its volume ratio", "its boxes", "its target",
+    "case",
+    "runs",
+    "ours ms",
+    "codac sivia ms",
+    "codac pave ms",
+    "time ratio codac sivia / ours",
+    "ours outer volume",
+    "codac sivia outer volume",
+    "codac pave outer volume",
+    "volume ratio ours / codac sivia",
+    "boxes ours / codac sivia",
+    "target",
+    "truth in every set",
+    "ours + ray test (intervals.rays) ms",
+    "its time ratio",
+    "its volume ratio",
+    "its boxes",
+    "its target",
 ]
 CROSS_HEADER = [
-    "case", "our outer boxes", "of them rejected by codac's test (a ray surely meets a wall nearer / only farther)",
-    "codac sivia outer boxes", "of them rejected by our test", "of them rejected by ours + ray test",
+    "case",
+    "our outer boxes",
+    "of them rejected by codac's test (a ray surely meets a wall nearer / only farther)",
+    "codac sivia outer boxes",
+    "of them rejected by our test",
+    "of them rejected by ours + ray test",
 ]
 
 ANALYSIS = """\
@@ -441,21 +573,33 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--write", action="store_true", help="update this section of BENCHMARKS.md")
     args = parser.parse_args(argv)
-    if min(args.landmark_runs, args.tracking_runs, args.global_runs, args.belt_runs) < 0 or args.repeats < 1:
+    if (
+        min(args.landmark_runs, args.tracking_runs, args.global_runs, args.belt_runs) < 0
+        or args.repeats < 1
+    ):
         parser.error("run counts must be >= 0 and --repeats >= 1")
     codac.set_nb_threads(1)  # one core each, as ours
     rng = np.random.default_rng(args.seed)
     hall = builtin_map("hall")
     f_rays, build_s = timed(lambda: ray_distance_function(hall.segments, ray_params()))
     cases = [
-        ("(a) range-only, 4 landmarks, eps 0.01", lambda: run_case_a(args.landmark_runs, args.repeats, rng),
-         args.landmark_runs),
-        (f"(b) hall rays, tracking +-0.5 m +-0.2 rad, eps {TRACKING_EPS:g}",
-         lambda: run_case_b("tracking", args.tracking_runs, TRACKING_EPS, args.repeats, rng, f_rays),
-         args.tracking_runs),
-        (f"(b) hall rays, global, eps {GLOBAL_EPS:g}",
-         lambda: run_case_b("global", args.global_runs, GLOBAL_EPS, args.repeats, rng, f_rays),
-         args.global_runs),
+        (
+            "(a) range-only, 4 landmarks, eps 0.01",
+            lambda: run_case_a(args.landmark_runs, args.repeats, rng),
+            args.landmark_runs,
+        ),
+        (
+            f"(b) hall rays, tracking +-0.5 m +-0.2 rad, eps {TRACKING_EPS:g}",
+            lambda: run_case_b(
+                "tracking", args.tracking_runs, TRACKING_EPS, args.repeats, rng, f_rays
+            ),
+            args.tracking_runs,
+        ),
+        (
+            f"(b) hall rays, global, eps {GLOBAL_EPS:g}",
+            lambda: run_case_b("global", args.global_runs, GLOBAL_EPS, args.repeats, rng, f_rays),
+            args.global_runs,
+        ),
     ]
     rows, cross_rows, all_kept = [], [], True
     for label, run, count in cases:
@@ -466,14 +610,28 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         all_kept &= kept
         if "cross" in results[0]:
-            nearer, farther, ours_rejects, ray_rejects, boxes = np.sum([r["cross"] for r in results], axis=0)
+            nearer, farther, ours_rejects, ray_rejects, boxes = np.sum(
+                [r["cross"] for r in results], axis=0
+            )
             codac_boxes = sum(r["codac sivia"].boxes for r in results)
-            cross_rows.append([label, str(boxes), f"{nearer + farther} ({nearer} / {farther})",
-                               str(codac_boxes), str(ours_rejects), str(ray_rejects)])
+            cross_rows.append(
+                [
+                    label,
+                    str(boxes),
+                    f"{nearer + farther} ({nearer} / {farther})",
+                    str(codac_boxes),
+                    str(ours_rejects),
+                    str(ray_rejects),
+                ]
+            )
         print(f"done: {label}", file=sys.stderr)
     table = markdown_table(HEADER, rows)
     cross = markdown_table(CROSS_HEADER, cross_rows) if cross_rows else ""
-    belt = markdown_table(BELT_HEADER, run_belt_case(args.belt_runs, args.repeats, rng)) if args.belt_runs else ""
+    belt = (
+        markdown_table(BELT_HEADER, run_belt_case(args.belt_runs, args.repeats, rng))
+        if args.belt_runs
+        else ""
+    )
     print(table)
     print()
     print(cross)
@@ -481,23 +639,30 @@ def main(argv: list[str] | None = None) -> int:
     print(belt)
     print(f"\n(codac's ray function: built in {build_s:.2f} s, not timed above)")
     if args.write:
-        command = (f"python benchmarks/intervals_vs_codac.py --landmark-runs {args.landmark_runs} --tracking-runs "
-                   f"{args.tracking_runs} --global-runs {args.global_runs} --belt-runs {args.belt_runs} "
-                   f"--repeats {args.repeats} --seed {args.seed}")
-        write_section(SECTION, "\n\n".join([
-            f"Machine: {machine_line('codac')}; codac on one thread.",
-            f"```sh\n{command}\n```",
-            "Figures are medians over the runs (times: best of the repeats for ours and case (a); one "
-            "run of codac on (b)). Problems and settings: the script's docstring.",
-            table,
-            "Each side's box test on the other's outer boxes (same box sizes, all runs summed): a "
-            "rejection means the other test is tighter on that box.",
-            cross,
-            "The ray test on the real belt and on narrower cones (tracking epochs in `hall`, "
-            "d_max 3 m, same scans with and without it):",
-            belt,
-            ANALYSIS,
-        ]))
+        command = (
+            f"python benchmarks/intervals_vs_codac.py --landmark-runs {args.landmark_runs} --tracking-runs "
+            f"{args.tracking_runs} --global-runs {args.global_runs} --belt-runs {args.belt_runs} "
+            f"--repeats {args.repeats} --seed {args.seed}"
+        )
+        write_section(
+            SECTION,
+            "\n\n".join(
+                [
+                    f"Machine: {machine_line('codac')}; codac on one thread.",
+                    f"```sh\n{command}\n```",
+                    "Figures are medians over the runs (times: best of the repeats for ours and case (a); one "
+                    "run of codac on (b)). Problems and settings: the script's docstring.",
+                    table,
+                    "Each side's box test on the other's outer boxes (same box sizes, all runs summed): a "
+                    "rejection means the other test is tighter on that box.",
+                    cross,
+                    "The ray test on the real belt and on narrower cones (tracking epochs in `hall`, "
+                    "d_max 3 m, same scans with and without it):",
+                    belt,
+                    ANALYSIS,
+                ]
+            ),
+        )
     if not all_kept:
         print("FAILED: a set lost the truth", file=sys.stderr)
         return 1

@@ -28,7 +28,15 @@ from scenarios.recording import write_recording
 from scenarios.runner import estimate, estimation_summary, simulate_spec
 from scenarios.spec import load_scenario
 
-STAGES = ("physics", "sensors", "dead reckoning", "interval epochs", "fusion", "summary", "recording")
+STAGES = (
+    "physics",
+    "sensors",
+    "dead reckoning",
+    "interval epochs",
+    "fusion",
+    "summary",
+    "recording",
+)
 
 
 def one_run(spec) -> tuple[dict[str, float], dict]:
@@ -36,7 +44,9 @@ def one_run(spec) -> tuple[dict[str, float], dict]:
     stages: dict[str, float] = {}
     start = time.perf_counter()
     physics_end = []
-    log = simulate_spec(spec, progress=lambda f: physics_end.append(time.perf_counter()) if f == 1.0 else None)
+    log = simulate_spec(
+        spec, progress=lambda f: physics_end.append(time.perf_counter()) if f == 1.0 else None
+    )
     end = time.perf_counter()
     stages["physics"] = physics_end[-1] - start
     stages["sensors"] = end - physics_end[-1]
@@ -65,13 +75,21 @@ def one_run(spec) -> tuple[dict[str, float], dict]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenario", nargs="?", default="hall")
-    parser.add_argument("--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)")
-    parser.add_argument("--tracker", choices=("sivia", "imagesp"), help="override the scenario's tracker")
-    parser.add_argument("--repeat", type=int, default=1, help="repeats, best kept per stage (default: %(default)s)")
+    parser.add_argument(
+        "--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--tracker", choices=("sivia", "imagesp"), help="override the scenario's tracker"
+    )
+    parser.add_argument(
+        "--repeat", type=int, default=1, help="repeats, best kept per stage (default: %(default)s)"
+    )
     args = parser.parse_args(argv)
     spec = load_scenario(args.scenario).with_run(duration_s=args.duration)
     if args.tracker:
-        spec = dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, tracker=args.tracker))
+        spec = dataclasses.replace(
+            spec, estimation=dataclasses.replace(spec.estimation, tracker=args.tracker)
+        )
 
     runs = [one_run(spec) for _ in range(max(1, args.repeat))]
     first, figures = runs[0]
@@ -82,7 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     print("| stage | first (s) | best (s) | share |\n|---|---|---|---|")
     for name in STAGES:
-        print(f"| {name} | {first[name]:.3f} | {best[name]:.3f} | {best[name] / sum(best.values()):.1%} |")
+        print(
+            f"| {name} | {first[name]:.3f} | {best[name]:.3f} | {best[name] / sum(best.values()):.1%} |"
+        )
     print(f"| **total** | **{sum(first.values()):.3f}** | **{sum(best.values()):.3f}** | |")
     print(
         f"| real-time factor | {args.duration / sum(first.values()):.0f}x | {args.duration / sum(best.values()):.0f}x | |"

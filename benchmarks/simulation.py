@@ -26,8 +26,12 @@ from scenarios.spec import load_scenario
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenario", nargs="?", default="hall")
-    parser.add_argument("--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)")
-    parser.add_argument("--repeat", type=int, default=3, help="repeats, best kept per stage (default: %(default)s)")
+    parser.add_argument(
+        "--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--repeat", type=int, default=3, help="repeats, best kept per stage (default: %(default)s)"
+    )
     args = parser.parse_args(argv)
 
     runs: list[dict[str, float]] = []
@@ -54,10 +58,14 @@ def main(argv: list[str] | None = None) -> int:
 
     first = runs[0]
     best = {name: min(run[name] for run in runs) for name in first}
-    print(f"robotsim run {args.scenario}: {args.duration:g} s simulated; first run (cold, as one command) and best of {args.repeat}")
+    print(
+        f"robotsim run {args.scenario}: {args.duration:g} s simulated; first run (cold, as one command) and best of {args.repeat}"
+    )
     print(f"{'stage':<16}{'first s':>10}{'best s':>10}{'share':>9}")
     for name in first:
-        print(f"{name:<16}{first[name]:>10.3f}{best[name]:>10.3f}{best[name] / sum(best.values()):>9.1%}")
+        print(
+            f"{name:<16}{first[name]:>10.3f}{best[name]:>10.3f}{best[name] / sum(best.values()):>9.1%}"
+        )
     print(f"{'total':<16}{sum(first.values()):>10.3f}{sum(best.values()):>10.3f}{1:>9.0%}")
     print(
         f"realtime factor: {args.duration / sum(first.values()):.0f}x first, "

@@ -32,7 +32,6 @@ from filterpy.kalman import UnscentedKalmanFilter as FilterpyUKF
 from scipy.linalg import lapack
 
 import localization.ukf as ukf_module
-
 from localization.gaussian import Gaussian
 from localization.models import MeasurementModel, ProcessModel
 from localization.motion_models import CTRV, pose_model
@@ -73,7 +72,11 @@ def ukf_step(models: tuple[ProcessModel, MeasurementModel], batch: int | None):
     ukf = UnscentedKalmanFilter(ScaledSigmaPoints(alpha=1e-3, beta=2.0, kappa=0.0))
     process, measurement = models
     shape = () if batch is None else (batch,)
-    belief = Gaussian(np.broadcast_to(MEAN, shape + (5,)), np.broadcast_to(COV, shape + (5, 5)), angle_indices=(2,))
+    belief = Gaussian(
+        np.broadcast_to(MEAN, shape + (5,)),
+        np.broadcast_to(COV, shape + (5, 5)),
+        angle_indices=(2,),
+    )
     z = np.array(np.broadcast_to(Z, shape + (3,)))
 
     def step():
@@ -86,12 +89,17 @@ def check_paths(batch: int) -> list[str]:
     """The failed checks (empty when all pass): compiled vs numpy step, compiled batch vs one run."""
     failures = []
     compiled, reference = ukf_step(compiled_models(), None)(), ukf_step(numpy_models(), None)()
-    difference = max(np.abs(compiled.mean - reference.mean).max(), np.abs(compiled.cov - reference.cov).max())
+    difference = max(
+        np.abs(compiled.mean - reference.mean).max(), np.abs(compiled.cov - reference.cov).max()
+    )
     print(f"compiled vs numpy step: largest difference {difference:.2g} (accepted {AGREEMENT:g})")
     if not difference <= AGREEMENT:
         failures.append("the compiled step differs from the numpy step")
     batched = ukf_step(compiled_models(), batch)()
-    if not (np.array_equal(batched.mean[-1], compiled.mean) and np.array_equal(batched.cov[-1], compiled.cov)):
+    if not (
+        np.array_equal(batched.mean[-1], compiled.mean)
+        and np.array_equal(batched.cov[-1], compiled.cov)
+    ):
         failures.append("the compiled batch differs from its one-run step")
     return failures
 
@@ -145,14 +153,22 @@ def filterpy_step():
 
     def circular_mean(sigmas, weights, index):
         mean = weights @ sigmas
-        mean[index] = math.atan2(weights @ np.sin(sigmas[:, index]), weights @ np.cos(sigmas[:, index]))
+        mean[index] = math.atan2(
+            weights @ np.sin(sigmas[:, index]), weights @ np.cos(sigmas[:, index])
+        )
         return mean
 
     ukf = FilterpyUKF(
-        dim_x=5, dim_z=3, dt=DT_S, hx=measure_xy_heading, fx=CTRV.transition,
+        dim_x=5,
+        dim_z=3,
+        dt=DT_S,
+        hx=measure_xy_heading,
+        fx=CTRV.transition,
         points=MerweScaledSigmaPoints(5, alpha=1e-3, beta=2.0, kappa=0.0),
-        x_mean_fn=lambda s, w: circular_mean(s, w, 2), z_mean_fn=lambda s, w: circular_mean(s, w, 2),
-        residual_x=lambda a, b: residual(a, b, 2), residual_z=lambda a, b: residual(a, b, 2),
+        x_mean_fn=lambda s, w: circular_mean(s, w, 2),
+        z_mean_fn=lambda s, w: circular_mean(s, w, 2),
+        residual_x=lambda a, b: residual(a, b, 2),
+        residual_z=lambda a, b: residual(a, b, 2),
     )
     ukf.Q, ukf.R = Q.copy(), R.copy()
 
@@ -200,31 +216,55 @@ def main(argv: list[str] | None = None) -> int:
         args.repeats,
     )
     compiled_single, compiled_batched = us["compiled_single"], us["compiled_batched"]
-    single, single_free, ctrv_single, theirs = us["single"], us["single_free"], us["ctrv_single"], us["theirs"]
-    batched, batched_free, whole_us, ctrv_batched = us["batched"], us["batched_free"], us["whole"], us["ctrv_batched"]
+    single, single_free, ctrv_single, theirs = (
+        us["single"],
+        us["single_free"],
+        us["ctrv_single"],
+        us["theirs"],
+    )
+    batched, batched_free, whole_us, ctrv_batched = (
+        us["batched"],
+        us["batched_free"],
+        us["whole"],
+        us["ctrv_batched"],
+    )
     add_us, chol_us, potrf_us = us["add"], us["chol"], us["potrf"]
     faults, whole_faults = page_faults(sliced), page_faults(whole)
     slices = ukf_module.SLICE_RUNS
     print("| figure | us | target |")
     print("|---|---|---|")
-    print(f"| compiled: one filter, predict + update (CTRV, 3 measurements) | {compiled_single:.1f} | 30 |")
+    print(
+        f"| compiled: one filter, predict + update (CTRV, 3 measurements) | {compiled_single:.1f} | 30 |"
+    )
     print(f"| compiled: batch of {args.batch}, per run-step | {compiled_batched:.2f} | 2.5 |")
     print(f"| numpy: one filter, predict + update | {single:.1f} | |")
     print(f"| numpy: one filter, same with a free model (filter share) | {single_free:.1f} | |")
     print(f"| CTRV transition of 11 sigma points, one call | {ctrv_single:.1f} | |")
-    print(f"| numpy: batch of {args.batch} in slices of <= {slices} runs, per run-step "
-          f"({faults:.0f} page faults/step) | {batched:.2f} | |")
-    print(f"| numpy: batch of {args.batch} in slices, free model, per run-step | {batched_free:.2f} | |")
-    print(f"| numpy: batch of {args.batch} in one piece, per run-step ({whole_faults:.0f} page faults/step) | {whole_us:.2f} | |")
+    print(
+        f"| numpy: batch of {args.batch} in slices of <= {slices} runs, per run-step "
+        f"({faults:.0f} page faults/step) | {batched:.2f} | |"
+    )
+    print(
+        f"| numpy: batch of {args.batch} in slices, free model, per run-step | {batched_free:.2f} | |"
+    )
+    print(
+        f"| numpy: batch of {args.batch} in one piece, per run-step ({whole_faults:.0f} page faults/step) | {whole_us:.2f} | |"
+    )
     print(f"| batch of {args.batch}, CTRV transition per run (11 points) | {ctrv_batched:.2f} | |")
     print(f"| filterpy UKF, one filter, same model (sigma-point loop) | {theirs:.1f} | |")
     print(f"| ratio filterpy / ours, one filter, compiled | {theirs / compiled_single:.1f}x | 8x |")
     print(f"| ratio filterpy / ours, one filter, numpy | {theirs / single:.1f}x | |")
-    print(f"| ratio filterpy (one filter) / ours batched per run, compiled | {theirs / compiled_batched:.0f}x | |")
-    print(f"| ratio filterpy (one filter) / ours batched per run, numpy | {theirs / batched:.0f}x | |")
+    print(
+        f"| ratio filterpy (one filter) / ours batched per run, compiled | {theirs / compiled_batched:.0f}x | |"
+    )
+    print(
+        f"| ratio filterpy (one filter) / ours batched per run, numpy | {theirs / batched:.0f}x | |"
+    )
     print(f"| numpy overhead: `a + a` on 5x5 | {add_us:.2f} | |")
     print(f"| numpy overhead: `np.linalg.cholesky` on 5x5 | {chol_us:.2f} | |")
-    print(f"| the same factor by LAPACK `dpotrf` directly (`scipy.linalg.lapack`) | {potrf_us:.2f} | |")
+    print(
+        f"| the same factor by LAPACK `dpotrf` directly (`scipy.linalg.lapack`) | {potrf_us:.2f} | |"
+    )
     return 0
 
 

@@ -62,9 +62,7 @@ def centres(boxes: np.ndarray) -> np.ndarray:
     return boxes[..., 0] + (boxes[..., 1] - boxes[..., 0]) / 2.0
 
 
-def bisect(
-    boxes: np.ndarray, scale: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+def bisect(boxes: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bisect every box ``(N, d, 2)`` at the middle of its widest scaled dimension.
 
     Returns ``(left, right)``, each ``(N, d, 2)``; they share the cut value, so their union is

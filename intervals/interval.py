@@ -263,8 +263,12 @@ def cos_sin(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(invalid="ignore"):  # unbounded: j0 infinite, and too_wide anyway
             reaches_max = too_wide | (np.mod(residue_max - j0, 4.0) < count)
             reaches_min = too_wide | (np.mod(residue_max + 2.0 - j0, 4.0) < count)
-        lo = np.where(reaches_min, -1.0, np.maximum(_widen_down(np.minimum(f_lo, f_hi), 2.0**-52), -1.0))
-        hi = np.where(reaches_max, 1.0, np.minimum(_widen_up(np.maximum(f_lo, f_hi), 2.0**-52), 1.0))
+        lo = np.where(
+            reaches_min, -1.0, np.maximum(_widen_down(np.minimum(f_lo, f_hi), 2.0**-52), -1.0)
+        )
+        hi = np.where(
+            reaches_max, 1.0, np.minimum(_widen_up(np.maximum(f_lo, f_hi), 2.0**-52), 1.0)
+        )
         return _pack(np.where(empty_mask, np.nan, lo), np.where(empty_mask, np.nan, hi))
 
     return bounds(c_lo, c_hi, 0.0), bounds(s_lo, s_hi, 1.0)

@@ -164,8 +164,10 @@ def _up(x):
 def _mul(a_lo, a_hi, b_lo, b_hi):
     """``[a] * [b]`` rounded outward, finite bounds (component arrays, broadcast)."""
     p = (a_lo * b_lo, a_lo * b_hi, a_hi * b_lo, a_hi * b_hi)
-    return (_down(np.minimum(np.minimum(p[0], p[1]), np.minimum(p[2], p[3]))),
-            _up(np.maximum(np.maximum(p[0], p[1]), np.maximum(p[2], p[3]))))
+    return (
+        _down(np.minimum(np.minimum(p[0], p[1]), np.minimum(p[2], p[3]))),
+        _up(np.maximum(np.maximum(p[0], p[1]), np.maximum(p[2], p[3]))),
+    )
 
 
 def _add(a_lo, a_hi, b_lo, b_hi):
@@ -184,8 +186,10 @@ def _point(values) -> np.ndarray:
 
 def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi):
     """``(lower, upper)`` of ``[c] / [s]`` for ``0 < s_lo <= s_hi`` (rounded outward)."""
-    return (_down(c_lo / np.where(c_lo >= 0.0, s_hi, s_lo)),
-            _up(c_hi / np.where(c_hi >= 0.0, s_lo, s_hi)))
+    return (
+        _down(c_lo / np.where(c_lo >= 0.0, s_hi, s_lo)),
+        _up(c_hi / np.where(c_hi >= 0.0, s_lo, s_hi)),
+    )
 
 
 def _sine_terms(b_lo, b_hi):
@@ -206,15 +210,19 @@ def _sine_terms(b_lo, b_hi):
     inv_lo, inv_hi = _down(1.0 / big), _up(1.0 / small)  # 1 / |sin|
     inv = (np.where(pos, inv_lo, -inv_hi), np.where(pos, inv_hi, -inv_lo))
     # cot = (sign cos) / |sin|, decreasing: [cot(b_hi), cot(b_lo)]
-    at_hi = _positive_quotient_bounds(gh - TRIG_TOL, gh + TRIG_TOL,
-                                      np.where(one_sign, ah - TRIG_TOL, 1.0), ah + TRIG_TOL)
-    at_lo = _positive_quotient_bounds(gl - TRIG_TOL, gl + TRIG_TOL,
-                                      np.where(one_sign, al - TRIG_TOL, 1.0), al + TRIG_TOL)
+    at_hi = _positive_quotient_bounds(
+        gh - TRIG_TOL, gh + TRIG_TOL, np.where(one_sign, ah - TRIG_TOL, 1.0), ah + TRIG_TOL
+    )
+    at_lo = _positive_quotient_bounds(
+        gl - TRIG_TOL, gl + TRIG_TOL, np.where(one_sign, al - TRIG_TOL, 1.0), al + TRIG_TOL
+    )
     zero = np.zeros_like(b_lo)
     inv = tuple(np.where(one_sign, v, 0.0) for v in inv)
     cot = (np.where(one_sign, at_hi[0], zero), np.where(one_sign, at_lo[1], zero))
-    sin = (np.where(pos, small, np.where(neg, -big, 0.0)),
-           np.where(pos, big, np.where(neg, -small, 0.0)))
+    sin = (
+        np.where(pos, small, np.where(neg, -big, 0.0)),
+        np.where(pos, big, np.where(neg, -small, 0.0)),
+    )
     return one_sign, inv, cot, sin, big
 
 
@@ -224,7 +232,8 @@ def _segment_terms(segments: np.ndarray) -> dict[str, np.ndarray]:
     ex = ia.sub(_point(segments[:, 1, 0]), ax)
     ey = ia.sub(_point(segments[:, 1, 1]), ay)
     return {
-        "ex": ex, "ey": ey,
+        "ex": ex,
+        "ey": ey,
         "L": ia.sqrt(ia.add(ia.sqr(ex), ia.sqr(ey))),
         "eps": ia.atan2(ey, ex),
         "det_ae": ia.sub(ia.mul(ax, ey), ia.mul(ay, ex)),
@@ -244,6 +253,7 @@ def _affine_range(c_lo, c_hi, x, y, seg):
     """``(lo, hi)`` of ``(c g - w . e) / L`` over ``c in [c_lo, c_hi]`` and the box ``x, y``:
     the hull of its exact ranges at ``c = c_lo`` and ``c = c_hi``, where it is affine in ``x``
     and ``y`` (each once): ``c det(a, e) - a . e + x (e_x - c e_y) + y (e_y + c e_x)``."""
+
     def at(c):
         ex, ey, det_ae, dot_ae = (seg[key] for key in ("ex", "ey", "det_ae", "dot_ae"))
         coef_x = _sub(ex[..., 0], ex[..., 1], *_mul(c, c, ey[..., 0], ey[..., 1]))
@@ -274,22 +284,29 @@ def _ray_meeting(b, kappa_terms, pose_terms, x, y, seg, slanted, reading=None):
     gl = (g_l[..., 0], g_l[..., 1])
     rc, rs, we = (rc[..., 0], rc[..., 1]), (rs[..., 0], rs[..., 1]), (we_l[..., 0], we_l[..., 1])
     rs_cot, rs_inv = _mul(*rs, *cot), _mul(*rs, *inv)
-    lam = _sub(*_sub(*_mul(*gl, *inv), *rc), *rs_cot)                          # (eq. 1)
+    lam = _sub(*_sub(*_mul(*gl, *inv), *rc), *rs_cot)  # (eq. 1)
     t_len = _sub(*_mul(*cot, *gl), *we)  # exact if axis-parallel
     if slanted.size:
-        exact = _affine_range(cot[0][..., slanted], cot[1][..., slanted], x, y,
-                              {key: v[:, :, slanted] for key, v in seg.items()})
+        exact = _affine_range(
+            cot[0][..., slanted],
+            cot[1][..., slanted],
+            x,
+            y,
+            {key: v[:, :, slanted] for key, v in seg.items()},
+        )
         t_len[0][..., slanted], t_len[1][..., slanted] = exact
-    t_len = _sub(*t_len, *rs_inv)                                               # (eq. 2)
+    t_len = _sub(*t_len, *rs_inv)  # (eq. 2)
     if reading is not None:
         with np.errstate(invalid="ignore"):  # inf * 0: a no-echo sensor's hi (unused) times
             # the placeholder 0 of sin B where it changes sign (overwritten below)
-            h = _mul(*_add(*_add(*reading, *rc), *rs_cot), *sin)                # (eq. 3)
+            h = _mul(*_add(*_add(*reading, *rc), *rs_cot), *sin)  # (eq. 3)
         h = (np.maximum(gl[0], h[0]), np.minimum(gl[1], h[1]))
         narrowed = _sub(*_sub(*_mul(*cot, *h), *we), *rs_inv)
         none = h[0] > h[1]
-        t_len = (np.where(none, np.inf, np.maximum(t_len[0], narrowed[0])),
-                 np.where(none, -np.inf, np.minimum(t_len[1], narrowed[1])))
+        t_len = (
+            np.where(none, np.inf, np.maximum(t_len[0], narrowed[0])),
+            np.where(none, -np.inf, np.minimum(t_len[1], narrowed[1])),
+        )
     lam = (np.where(one_sign, lam[0], -np.inf), np.where(one_sign, lam[1], np.inf))
     t_len = (np.where(one_sign, t_len[0], -np.inf), np.where(one_sign, t_len[1], np.inf))
     return lam, t_len, one_sign, sin_max
@@ -331,8 +348,10 @@ def sub_boxes(boxes: np.ndarray, pieces: tuple[int, int, int]) -> np.ndarray:
 @numba.njit(cache=True)
 def _k_mul(a_lo, a_hi, b_lo, b_hi):
     p0, p1, p2, p3 = a_lo * b_lo, a_lo * b_hi, a_hi * b_lo, a_hi * b_hi
-    return (np.nextafter(np.minimum(np.minimum(p0, p1), np.minimum(p2, p3)), -np.inf),
-            np.nextafter(np.maximum(np.maximum(p0, p1), np.maximum(p2, p3)), np.inf))
+    return (
+        np.nextafter(np.minimum(np.minimum(p0, p1), np.minimum(p2, p3)), -np.inf),
+        np.nextafter(np.maximum(np.maximum(p0, p1), np.maximum(p2, p3)), np.inf),
+    )
 
 
 @numba.njit(cache=True)
@@ -420,8 +439,9 @@ def _k_meeting(b_lo, b_hi, rc, rs, h, we, x, y, sv, slanted, r_lo, r_hi, narrow_
 
 
 @numba.njit(cache=True)
-def _k_piece_rejections(parts, pose, seg, bbox, slanted, base, kappa, lo_d, hi_d, kind, rho_hi,
-                        guard, out):
+def _k_piece_rejections(
+    parts, pose, seg, bbox, slanted, base, kappa, lo_d, hi_d, kind, rho_hi, guard, out
+):
     """Compiled :func:`piece_rejections` on ``parts (P, 3, 2)`` into ``out (P, k)`` bool.
 
     ``pose (P, m, 2, 2)``: h and (w . e) / L; ``seg (m, 5, 2)``: ex, ey, L, det_ae, dot_ae;
@@ -453,20 +473,42 @@ def _k_piece_rejections(parts, pose, seg, bbox, slanted, base, kappa, lo_d, hi_d
                 # shortcut, same verdicts: |lambda| >= min |h| - rho (|sin B| <= 1 + 1e-9)
                 off_line = np.nextafter(np.maximum(h[0], -h[1]) - rho_hi[i], -np.inf)
                 gap = np.maximum(
-                    np.maximum(np.nextafter(bbox[j, 0] - x[1], -np.inf),
-                               np.nextafter(x[0] - bbox[j, 1], -np.inf)),
-                    np.maximum(np.nextafter(bbox[j, 2] - y[1], -np.inf),
-                               np.nextafter(y[0] - bbox[j, 3], -np.inf)))
+                    np.maximum(
+                        np.nextafter(bbox[j, 0] - x[1], -np.inf),
+                        np.nextafter(x[0] - bbox[j, 1], -np.inf),
+                    ),
+                    np.maximum(
+                        np.nextafter(bbox[j, 2] - y[1], -np.inf),
+                        np.nextafter(y[0] - bbox[j, 3], -np.inf),
+                    ),
+                )
                 if not possible and not off_line > far_hit and not gap > far_box:
                     b = _k_sub(base[0, i, j, 0], base[0, i, j, 1], th_lo, th_hi)
                     one_sign, sin_max = _k_meeting(
-                        b[0], b[1], (kappa[0, i, 0, 0], kappa[0, i, 0, 1]),
-                        (kappa[0, i, 1, 0], kappa[0, i, 1, 1]), h, we, x, y, sv, slanted[j],
-                        lo - guard, hi + guard, True, trig, res)
-                    misses = (res[1] < lo - guard or res[0] > hi + guard or res[3] < -guard
-                              or res[2] > sv[2, 1] + guard
-                              or off_line > np.nextafter(
-                                  np.nextafter(hi + guard, np.inf) * sin_max, np.inf))
+                        b[0],
+                        b[1],
+                        (kappa[0, i, 0, 0], kappa[0, i, 0, 1]),
+                        (kappa[0, i, 1, 0], kappa[0, i, 1, 1]),
+                        h,
+                        we,
+                        x,
+                        y,
+                        sv,
+                        slanted[j],
+                        lo - guard,
+                        hi + guard,
+                        True,
+                        trig,
+                        res,
+                    )
+                    misses = (
+                        res[1] < lo - guard
+                        or res[0] > hi + guard
+                        or res[3] < -guard
+                        or res[2] > sv[2, 1] + guard
+                        or off_line
+                        > np.nextafter(np.nextafter(hi + guard, np.inf) * sin_max, np.inf)
+                    )
                     possible = not misses
                 for d in range(1, n_rays):
                     # shortcuts, same verdicts: no ray meets the line, or the segment, nearer
@@ -474,16 +516,32 @@ def _k_piece_rejections(parts, pose, seg, bbox, slanted, base, kappa, lo_d, hi_d
                         break
                     b = _k_sub(base[d, i, j, 0], base[d, i, j, 1], th_lo, th_hi)
                     one_sign, _ = _k_meeting(
-                        b[0], b[1], (kappa[d, i, 0, 0], kappa[d, i, 0, 1]),
-                        (kappa[d, i, 1, 0], kappa[d, i, 1, 1]), h, we, x, y, sv, slanted[j],
-                        0.0, 0.0, False, trig, res)
-                    nearer = (one_sign and res[0] >= 0.0 and res[1] < lo - guard
-                              and res[2] >= 0.0 and res[3] <= sv[2, 0])
+                        b[0],
+                        b[1],
+                        (kappa[d, i, 0, 0], kappa[d, i, 0, 1]),
+                        (kappa[d, i, 1, 0], kappa[d, i, 1, 1]),
+                        h,
+                        we,
+                        x,
+                        y,
+                        sv,
+                        slanted[j],
+                        0.0,
+                        0.0,
+                        False,
+                        trig,
+                        res,
+                    )
+                    nearer = (
+                        one_sign
+                        and res[0] >= 0.0
+                        and res[1] < lo - guard
+                        and res[2] >= 0.0
+                        and res[3] <= sv[2, 0]
+                    )
                 if possible and nearer:
                     break
             out[p, i] = (echo and not possible) or nearer
-
-
 
 
 def _checked(boxes, scan, pieces) -> tuple[np.ndarray, tuple[int, int, int]]:
@@ -532,10 +590,22 @@ def _compute_ray_constants(segments, belt, offsets) -> dict:
         rays.append((ia.sub(seg["eps"], turn[None, :, None]), kappa_terms))
     slanted = (segments[:, 1, 0] != segments[:, 0, 0]) & (segments[:, 1, 1] != segments[:, 0, 1])
     ends = segments
-    bbox = np.stack([ends[:, :, 0].min(axis=1), ends[:, :, 0].max(axis=1),
-                     ends[:, :, 1].min(axis=1), ends[:, :, 1].max(axis=1)], axis=1)  # (m, 4)
-    return {"seg": seg, "rays": rays, "rho_hi": rho[None, :, None, 1], "slanted": slanted,
-            "bbox": bbox}
+    bbox = np.stack(
+        [
+            ends[:, :, 0].min(axis=1),
+            ends[:, :, 0].max(axis=1),
+            ends[:, :, 1].min(axis=1),
+            ends[:, :, 1].max(axis=1),
+        ],
+        axis=1,
+    )  # (m, 4)
+    return {
+        "seg": seg,
+        "rays": rays,
+        "rho_hi": rho[None, :, None, 1],
+        "slanted": slanted,
+        "bbox": bbox,
+    }
 
 
 def _box_gap(x, y, bbox):
@@ -544,7 +614,8 @@ def _box_gap(x, y, bbox):
     down; 0 or negative where they overlap)."""
     return np.maximum(
         np.maximum(_down(bbox[:, 0] - x[..., 1]), _down(x[..., 0] - bbox[:, 1])),
-        np.maximum(_down(bbox[:, 2] - y[..., 1]), _down(y[..., 0] - bbox[:, 3])))
+        np.maximum(_down(bbox[:, 2] - y[..., 1]), _down(y[..., 0] - bbox[:, 3])),
+    )
 
 
 def _numpy_pieces(parts, scan, const, reject) -> None:
@@ -553,7 +624,7 @@ def _numpy_pieces(parts, scan, const, reject) -> None:
     for start in range(0, parts.shape[0], block):
         with np.errstate(invalid="ignore"):  # unbounded boxes: inf - inf, 0 * inf give NaN
             # bounds, which fail every strict comparison below and so keep the piece
-            _numpy_block(parts[start:start + block], scan, const, reject[start:start + block])
+            _numpy_block(parts[start : start + block], scan, const, reject[start : start + block])
 
 
 def _numpy_block(parts, scan, const, reject) -> None:
@@ -567,48 +638,75 @@ def _numpy_block(parts, scan, const, reject) -> None:
     part = parts[:, :, None, None]  # (B, 3, 1, 1, 2)
     x, y, theta = part[:, 0], part[:, 1], part[:, 2]  # (B, 1, 1, 2)
     pose = _pose_terms(x, y, seg)
-    meetings = [_ray_meeting(ia.sub(base, theta), kappa, pose, x, y, seg, slanted,
-                             (lo - guard, hi + guard) if i == 0 else None)
-                for i, (base, kappa) in enumerate(rays)]
+    meetings = [
+        _ray_meeting(
+            ia.sub(base, theta),
+            kappa,
+            pose,
+            x,
+            y,
+            seg,
+            slanted,
+            (lo - guard, hi + guard) if i == 0 else None,
+        )
+        for i, (base, kappa) in enumerate(rays)
+    ]
     # hit test (delta over the cone): kept unless every segment misses
     (lam_lo, lam_hi), (t_lo, t_hi), _, sin_max = meetings[0]
     g_l = pose[0]  # |lambda sin B| >= |g / L| - rho: a line far off a near-parallel ray
     off_line = _down(np.maximum(g_l[..., 0], -g_l[..., 1]) - rho_hi)
-    misses = ((lam_hi < lo - guard) | (lam_lo > hi + guard)
-              | (t_hi < -guard) | (t_lo > length_hi + guard)
-              | (off_line > _up(_up(hi + guard) * sin_max))
-              | (_box_gap(x, y, const["bbox"]) > _up(_up(hi + guard) + rho_hi)))
+    misses = (
+        (lam_hi < lo - guard)
+        | (lam_lo > hi + guard)
+        | (t_hi < -guard)
+        | (t_lo > length_hi + guard)
+        | (off_line > _up(_up(hi + guard) * sin_max))
+        | (_box_gap(x, y, const["bbox"]) > _up(_up(hi + guard) + rho_hi))
+    )
     possible = ~misses.all(axis=-1)
     # free-space test (fixed offsets): the piece surely meets a segment nearer than lo
     nearer = np.zeros(possible.shape, dtype=bool)
     for (lam_lo, lam_hi), (t_lo, t_hi), one_sign, _ in meetings[1:]:
-        nearer |= (one_sign & (lam_lo >= 0.0) & (lam_hi < lo - guard)
-                   & (t_lo >= 0.0) & (t_hi <= length_lo)).any(axis=-1)
+        nearer |= (
+            one_sign & (lam_lo >= 0.0) & (lam_hi < lo - guard) & (t_lo >= 0.0) & (t_hi <= length_lo)
+        ).any(axis=-1)
     reject |= (echo & ~possible) | ((echo | free) & nearer)
 
 
 def _compiled_pieces(parts, scan, const, reject) -> None:
     """Compiled engine (:func:`_k_piece_rejections`), same contract as :func:`_numpy_pieces`."""
     seg = const["seg"]
-    g_l, we_l = _pose_terms(parts[:, 0, None], parts[:, 1, None], {
-        key: v[0] for key, v in seg.items()})  # (P, m, 2) each
+    g_l, we_l = _pose_terms(
+        parts[:, 0, None], parts[:, 1, None], {key: v[0] for key, v in seg.items()}
+    )  # (P, m, 2) each
     out = np.empty(reject.shape, dtype=np.bool_)
     _k_piece_rejections(
-        np.ascontiguousarray(parts), np.ascontiguousarray(np.stack([g_l, we_l], axis=2)),
-        np.ascontiguousarray(np.stack([seg[key][0, 0] for key in
-                                       ("ex", "ey", "L", "det_ae", "dot_ae")], axis=1)),
-        np.ascontiguousarray(const["bbox"]), np.ascontiguousarray(const["slanted"]),
+        np.ascontiguousarray(parts),
+        np.ascontiguousarray(np.stack([g_l, we_l], axis=2)),
+        np.ascontiguousarray(
+            np.stack([seg[key][0, 0] for key in ("ex", "ey", "L", "det_ae", "dot_ae")], axis=1)
+        ),
+        np.ascontiguousarray(const["bbox"]),
+        np.ascontiguousarray(const["slanted"]),
         np.ascontiguousarray(np.concatenate([base for base, _ in const["rays"]], axis=0)),
-        np.ascontiguousarray(np.stack([np.stack([rc[0, :, 0], rs[0, :, 0]], axis=1)
-                                       for _, (rc, rs) in const["rays"]])),
-        np.ascontiguousarray(scan.ranges[:, 0]), np.ascontiguousarray(scan.ranges[:, 1]),
-        np.ascontiguousarray(scan.kind), np.ascontiguousarray(const["rho_hi"][0, :, 0]),
-        float(sonar.GUARD_M), out)
+        np.ascontiguousarray(
+            np.stack(
+                [np.stack([rc[0, :, 0], rs[0, :, 0]], axis=1) for _, (rc, rs) in const["rays"]]
+            )
+        ),
+        np.ascontiguousarray(scan.ranges[:, 0]),
+        np.ascontiguousarray(scan.ranges[:, 1]),
+        np.ascontiguousarray(scan.kind),
+        np.ascontiguousarray(const["rho_hi"][0, :, 0]),
+        float(sonar.GUARD_M),
+        out,
+    )
     reject |= out
 
 
-def piece_rejections(boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES,
-                     engine: str = "compiled") -> np.ndarray:
+def piece_rejections(
+    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+) -> np.ndarray:
     """``(N, P, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of piece
     ``j`` of box ``n`` (the sub-boxes of :func:`sub_boxes`, ``P = px * py * pt``).
 
@@ -635,15 +733,17 @@ def piece_rejections(boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES,
     return reject.reshape(n, p, k)
 
 
-def ray_rejections(boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES,
-                   engine: str = "compiled") -> np.ndarray:
+def ray_rejections(
+    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+) -> np.ndarray:
     """``(N, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of box ``n``
     (it rejects every piece; see :func:`piece_rejections`)."""
     return piece_rejections(boxes, scan, pieces, engine).all(axis=1)
 
 
-def joint_rejection_counts(boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES,
-                           other=None, engine: str = "compiled") -> np.ndarray:
+def joint_rejection_counts(
+    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
+) -> np.ndarray:
     """``(N,)`` int: over the pieces of box ``n``, the smallest number of sensors rejecting the
     piece. A box with a count above ``q`` holds no pose that leaves at most ``q`` readings
     unexplained (each pose lies in some piece). ``other``: ``(N, k)`` rejections of another
@@ -656,8 +756,14 @@ def joint_rejection_counts(boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES,
     return np.count_nonzero(rejected, axis=2).min(axis=1, initial=rejected.shape[2])
 
 
-def joint_rejections(boxes, scan: sonar.SonarScan, q: int = 0, pieces=DEFAULT_PIECES,
-                     other=None, engine: str = "compiled") -> np.ndarray:
+def joint_rejections(
+    boxes,
+    scan: sonar.SonarScan,
+    q: int = 0,
+    pieces=DEFAULT_PIECES,
+    other=None,
+    engine: str = "compiled",
+) -> np.ndarray:
     """``(N,)`` bool: :func:`joint_rejection_counts` above ``q`` (no pose of the box leaves at
     most ``q`` readings unexplained). Stronger than counting :func:`ray_rejections`: one
     sensor may reject some pieces and another sensor the others."""

@@ -141,7 +141,6 @@ ENGINES = ("compiled", "numpy")
 (:mod:`intervals.sonar_kernel`, the default) and the numpy reference it is tested against."""
 
 
-
 @dataclass(frozen=True, eq=False)
 class SonarBelt:
     """Geometry and error bounds of a sonar belt (same fields as ``robotsim``'s parameters).
@@ -254,9 +253,11 @@ class SonarBelt:
         ``r_lo, r_hi`` (:meth:`mount_radius_bounds`), and ``(cos, sin)`` of the right and left
         cone edges (:meth:`cone_trig`): the very values the numpy reference uses."""
         (c_right, s_right), (c_left, s_left) = self.cone_trig
-        table = np.ascontiguousarray(np.column_stack(
-            [*self.mount_trig, *self.mount_radius_bounds, c_right, s_right, c_left, s_left]
-        ))
+        table = np.ascontiguousarray(
+            np.column_stack(
+                [*self.mount_trig, *self.mount_radius_bounds, c_right, s_right, c_left, s_left]
+            )
+        )
         table.setflags(write=False)
         return table
 
@@ -471,15 +472,21 @@ def _sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
     cb, sb = belt.mount_trig
 
     def turned(c, s):  # ((N, k) x4): unit vectors at theta_lo + c and theta_hi + c
-        return (cos_lo * c - sin_lo * s, sin_lo * c + cos_lo * s,
-                cos_hi * c - sin_hi * s, sin_hi * c + cos_hi * s)
+        return (
+            cos_lo * c - sin_lo * s,
+            sin_lo * c + cos_lo * s,
+            cos_hi * c - sin_hi * s,
+            sin_hi * c + cos_hi * s,
+        )
 
     # sensor positions: x + r cos(theta + beta) over the arc [theta_lo, theta_hi] + beta
     ax, ay, bx, by = turned(cb, sb)
     half_turn = (width >= np.pi)[:, None]
     whole = full[:, None]
-    reach = {axis: whole | _arc_reaches(ax, ay, bx, by, *axis, half_turn)
-             for axis in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))}
+    reach = {
+        axis: whole | _arc_reaches(ax, ay, bx, by, *axis, half_turn)
+        for axis in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
+    }
     cos_min = np.where(reach[(-1.0, 0.0)], -1.0, np.minimum(ax, bx))
     cos_max = np.where(reach[(1.0, 0.0)], 1.0, np.maximum(ax, bx))
     sin_min = np.where(reach[(0.0, -1.0)], -1.0, np.minimum(ay, by))
@@ -497,13 +504,15 @@ def _sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
     (c_right, s_right), (c_left, s_left) = belt.cone_trig
     right_lo_x, right_lo_y, right_hi_x, right_hi_y = turned(c_right, s_right)
     left_lo_x, left_lo_y, left_hi_x, left_hi_y = turned(c_left, s_left)
-    narrow = (trusted & (width + 2.0 * belt.half_aperture_rad < np.pi - _ANGLE_MARGIN_RAD))
+    narrow = trusted & (width + 2.0 * belt.half_aperture_rad < np.pi - _ANGLE_MARGIN_RAD)
     narrow = narrow[:, None]
-    union = _wedge_constraints((right_lo_x, right_lo_y), (left_hi_x, left_hi_y),
-                               cx, cy, hx, hy, -1.0)
+    union = _wedge_constraints(
+        (right_lo_x, right_lo_y), (left_hi_x, left_hi_y), cx, cy, hx, hy, -1.0
+    )
     union = tuple((nx, ny, np.where(narrow, c, -np.inf)) for nx, ny, c in union)
-    inter = _wedge_constraints((right_hi_x, right_hi_y), (left_lo_x, left_lo_y),
-                               cx, cy, hx, hy, 1.0)
+    inter = _wedge_constraints(
+        (right_hi_x, right_hi_y), (left_lo_x, left_lo_y), cx, cy, hx, hy, 1.0
+    )
     sure = trusted & (width < 2.0 * belt.half_aperture_rad - _ANGLE_MARGIN_RAD)
     sure = np.broadcast_to(sure[:, None], cx.shape)
     return _SensorBoxes(cx, cy, hx, hy, union, tuple(inter), sure)
@@ -519,8 +528,14 @@ def _room_verdict(
     if engine == "compiled":
         n = boxes.shape[0]
         outside, inside = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
-        sonar_kernel.room_verdicts_into(np.ascontiguousarray(boxes, dtype=np.float64), boundary,
-                                        GUARD_M, NEAR_SWITCH_M, outside, inside)
+        sonar_kernel.room_verdicts_into(
+            np.ascontiguousarray(boxes, dtype=np.float64),
+            boundary,
+            GUARD_M,
+            NEAR_SWITCH_M,
+            outside,
+            inside,
+        )
         return outside, inside
     a = boundary
     e = np.roll(boundary, -1, axis=0) - a
@@ -562,10 +577,23 @@ def sensor_verdicts(
     reject, certain = np.empty((n, k), dtype=bool), np.empty((n, k), dtype=bool)
     belt, boxes = scan.belt, np.ascontiguousarray(boxes)  # one compiled signature: C order
     sonar_kernel.sensor_verdicts_into(
-        boxes, *_heading_trig(boxes), scan.segments, scan.ranges, scan.kind, scan.reach_m,
-        belt.kernel_table, belt.half_aperture_rad, belt.sensor_box_margin_m,
-        GUARD_M, NEAR_SWITCH_M, _ARC_SLACK, _ANGLE_MARGIN_RAD, ia.TRIG_EXACT_LIMIT_RAD,
-        bool(inner), reject, certain,
+        boxes,
+        *_heading_trig(boxes),
+        scan.segments,
+        scan.ranges,
+        scan.kind,
+        scan.reach_m,
+        belt.kernel_table,
+        belt.half_aperture_rad,
+        belt.sensor_box_margin_m,
+        GUARD_M,
+        NEAR_SWITCH_M,
+        _ARC_SLACK,
+        _ANGLE_MARGIN_RAD,
+        ia.TRIG_EXACT_LIMIT_RAD,
+        bool(inner),
+        reject,
+        certain,
     )
     return reject, certain
 
@@ -583,9 +611,14 @@ def _numpy_sensor_verdicts(boxes: np.ndarray, scan: SonarScan, inner: bool):
     sx_lo, sx_hi = (sb.cx - sb.hx).min(axis=1), (sb.cx + sb.hx).max(axis=1)
     sy_lo, sy_hi = (sb.cy - sb.hy).min(axis=1), (sb.cy + sb.hy).max(axis=1)
     gap = _segment_box_gap(
-        seg[:, 0, 0], seg[:, 0, 1], seg[:, 1, 0] - seg[:, 0, 0], seg[:, 1, 1] - seg[:, 0, 1],
-        ((sx_lo + sx_hi) / 2)[:, None], ((sy_lo + sy_hi) / 2)[:, None],
-        ((sx_hi - sx_lo) / 2)[:, None], ((sy_hi - sy_lo) / 2)[:, None],
+        seg[:, 0, 0],
+        seg[:, 0, 1],
+        seg[:, 1, 0] - seg[:, 0, 0],
+        seg[:, 1, 1] - seg[:, 0, 1],
+        ((sx_lo + sx_hi) / 2)[:, None],
+        ((sy_lo + sy_hi) / 2)[:, None],
+        ((sx_hi - sx_lo) / 2)[:, None],
+        ((sy_hi - sy_lo) / 2)[:, None],
     )
     box_idx, seg_idx = np.nonzero(gap <= scan.reach_m + GUARD_M)  # (P,) visible pairs
     ax, ay = seg[seg_idx, 0, 0][:, None], seg[seg_idx, 0, 1][:, None]  # (P, 1)
@@ -608,10 +641,13 @@ def _numpy_sensor_verdicts(boxes: np.ndarray, scan: SonarScan, inner: bool):
     p0x, p0y = ax + t0 * ex, ay + t0 * ey
     dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
     dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy) - GUARD_M
-    dist_ub = np.maximum(
-        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
-    ) + GUARD_M
+    dist_ub = (
+        np.maximum(
+            _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+            _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+        )
+        + GUARD_M
+    )
     hit_ok = (dist_lb <= hi_t) & (dist_ub >= lo_t)
 
     # free-space test: segment points inside the cone for every pose of the box (the
@@ -628,9 +664,13 @@ def _numpy_sensor_verdicts(boxes: np.ndarray, scan: SonarScan, inner: bool):
         part = u0 <= u1
         sure[fs] = part
         u0, u1 = np.where(part, u0, 0.0), np.where(part, u1, 0.0)
-        far_bound[fs] = _nearest_on_segment(
-            cx[fs], cy[fs], fax + u0 * fex, fay + u0 * fey, (u1 - u0) * fex, (u1 - u0) * fey
-        )[2] + np.hypot(hx[fs], hy[fs]) + GUARD_M  # >= |P - s| for every s of the sensor box
+        far_bound[fs] = (
+            _nearest_on_segment(
+                cx[fs], cy[fs], fax + u0 * fex, fay + u0 * fey, (u1 - u0) * fex, (u1 - u0) * fey
+            )[2]
+            + np.hypot(hx[fs], hy[fs])
+            + GUARD_M
+        )  # >= |P - s| for every s of the sensor box
     free_fires = sure & (far_bound < lo_t)
 
     idx = box * k + sensor
@@ -715,7 +755,9 @@ def _pave(local: SonarScan, boxes, eps, q, scale, inner, splits_per_level, engin
     stored, counts = [], []
 
     def recount(b, reject):
-        return rays.joint_rejection_counts(b, local, rays.DEFAULT_PIECES, other=reject, engine=engine)
+        return rays.joint_rejection_counts(
+            b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
+        )
 
     def test(b):
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
@@ -729,8 +771,9 @@ def _pave(local: SonarScan, boxes, eps, q, scale, inner, splits_per_level, engin
         counts.append(rejects[keep])
         return verdicts
 
-    paving = sivia(test, boxes, eps, scale, splits_per_level=splits_per_level,
-                   min_level_boxes=MIN_LEVEL_BOXES)
+    paving = sivia(
+        test, boxes, eps, scale, splits_per_level=splits_per_level, min_level_boxes=MIN_LEVEL_BOXES
+    )
     rejects = np.concatenate(counts)
     if not np.array_equal(np.concatenate(stored), paving.boundary):
         reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
@@ -764,8 +807,17 @@ def localize(
     boxes = _initial_poses(initial)
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
-    return _pave(local, boxes, eps, q, scale, inner, splits_per_level, engine,
-                 _uses_ray_test(ray_test, scan.belt))[0]
+    return _pave(
+        local,
+        boxes,
+        eps,
+        q,
+        scale,
+        inner,
+        splits_per_level,
+        engine,
+        _uses_ray_test(ray_test, scan.belt),
+    )[0]
 
 
 @dataclass(frozen=True)
@@ -816,13 +868,23 @@ def gomne(
     boxes = _initial_poses(initial)
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
-    widest, rejects = _pave(local, boxes, eps, q_max, scale, inner, 3, engine, _uses_ray_test(ray_test, scan.belt))
+    widest, rejects = _pave(
+        local, boxes, eps, q_max, scale, inner, 3, engine, _uses_ray_test(ray_test, scan.belt)
+    )
     if widest.is_empty:
         return GomneResult(widest, None, None)
     if inner:
         for q in range(q_max):
-            minimal = localize(scan, widest.outer, eps, q, heading_scale_m_per_rad, inner,
-                               engine=engine, ray_test=ray_test)
+            minimal = localize(
+                scan,
+                widest.outer,
+                eps,
+                q,
+                heading_scale_m_per_rad,
+                inner,
+                engine=engine,
+                ray_test=ray_test,
+            )
             if not minimal.is_empty:
                 break
         else:

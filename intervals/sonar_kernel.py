@@ -136,8 +136,19 @@ def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
 
 
 @numba.njit(cache=True)
-def _sensor_rows(box, cos_theta, sin_theta, belt, half_aperture_rad, margin_m, guard_m,
-                 arc_slack, angle_margin_rad, trig_limit_rad, rows):
+def _sensor_rows(
+    box,
+    cos_theta,
+    sin_theta,
+    belt,
+    half_aperture_rad,
+    margin_m,
+    guard_m,
+    arc_slack,
+    angle_margin_rad,
+    trig_limit_rad,
+    rows,
+):
     """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
     ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar._sensor_boxes``); returns ``sure``
@@ -191,9 +202,26 @@ def _sensor_rows(box, cos_theta, sin_theta, belt, half_aperture_rad, margin_m, g
 
 
 @numba.njit(cache=True)
-def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, reach_m, belt,
-                         half_aperture_rad, margin_m, guard_m, near_switch_m, arc_slack,
-                         angle_margin_rad, trig_limit_rad, inner, reject, certain):
+def sensor_verdicts_into(
+    boxes,
+    cos_theta,
+    sin_theta,
+    segments,
+    ranges,
+    kind,
+    reach_m,
+    belt,
+    half_aperture_rad,
+    margin_m,
+    guard_m,
+    near_switch_m,
+    arc_slack,
+    angle_margin_rad,
+    trig_limit_rad,
+    inner,
+    reject,
+    certain,
+):
     """Per box and sensor verdicts of :func:`intervals.sonar.sensor_verdicts`, in place.
 
     ``boxes (N, 3, 2)`` and ``cos_theta, sin_theta (N, 2)`` of their heading bounds (numpy's
@@ -212,8 +240,19 @@ def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, re
     sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
     visible = reach_m + guard_m
     for n in range(boxes.shape[0]):
-        sure = _sensor_rows(boxes[n], cos_theta[n], sin_theta[n], belt, half_aperture_rad,
-                            margin_m, guard_m, arc_slack, angle_margin_rad, trig_limit_rad, rows)
+        sure = _sensor_rows(
+            boxes[n],
+            cos_theta[n],
+            sin_theta[n],
+            belt,
+            half_aperture_rad,
+            margin_m,
+            guard_m,
+            arc_slack,
+            angle_margin_rad,
+            trig_limit_rad,
+            rows,
+        )
         # the hull of the sensor boxes: only segments within reach of it take part
         sx_lo, sx_hi = rows[0, CX] - rows[0, HX], rows[0, CX] + rows[0, HX]
         sy_lo, sy_hi = rows[0, CY] - rows[0, HY], rows[0, CY] + rows[0, HY]
@@ -231,8 +270,9 @@ def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, re
         for j in range(segments.shape[0]):
             ax, ay = segments[j, 0, 0], segments[j, 0, 1]
             ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-            gap = _segment_box_gap(ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy,
-                                   near_switch_m)
+            gap = _segment_box_gap(
+                ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
+            )
             if not gap <= visible:
                 continue
             for i in range(k):
@@ -247,10 +287,16 @@ def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, re
                 # hit test: distance bounds between that part and the sensor box
                 p0x, p0y = ax + t0 * ex, ay + t0 * ey
                 dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-                dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy,
-                                           near_switch_m) - guard_m
-                dist_ub = _max(_point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                               _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy)) + guard_m
+                dist_lb = (
+                    _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
+                )
+                dist_ub = (
+                    _max(
+                        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+                        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+                    )
+                    + guard_m
+                )
                 if dist_lb <= hi and dist_ub >= lo:
                     hit[i] = True
                 if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
@@ -259,9 +305,13 @@ def sensor_verdicts_into(boxes, cos_theta, sin_theta, segments, ranges, kind, re
                 if sure:
                     u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
                     if u0 <= u1:
-                        far_bound = _nearest_distance(
-                            cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-                        )[2] + math.hypot(hx, hy) + guard_m
+                        far_bound = (
+                            _nearest_distance(
+                                cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
+                            )[2]
+                            + math.hypot(hx, hy)
+                            + guard_m
+                        )
                         if far_bound < lo:
                             fires[i] = True
                         if far_bound <= hi:

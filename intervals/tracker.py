@@ -82,18 +82,29 @@ class TrackerSettings:
     def __post_init__(self) -> None:
         checks = (
             (np.isfinite(self.v_max_m_s) and self.v_max_m_s >= 0, "v_max_m_s must be >= 0"),
-            (np.isfinite(self.omega_max_rad_s) and self.omega_max_rad_s >= 0,
-             "omega_max_rad_s must be >= 0"),
+            (
+                np.isfinite(self.omega_max_rad_s) and self.omega_max_rad_s >= 0,
+                "omega_max_rad_s must be >= 0",
+            ),
             (np.isfinite(self.eps_m) and self.eps_m > 0, "eps_m must be > 0"),
-            (np.isfinite(self.heading_scale_m_per_rad) and self.heading_scale_m_per_rad > 0,
-             "heading_scale_m_per_rad must be > 0"),
-            (isinstance(self.q_max, (int, np.integer)) and self.q_max >= 0,
-             "q_max must be an integer >= 0"),
+            (
+                np.isfinite(self.heading_scale_m_per_rad) and self.heading_scale_m_per_rad > 0,
+                "heading_scale_m_per_rad must be > 0",
+            ),
+            (
+                isinstance(self.q_max, (int, np.integer)) and self.q_max >= 0,
+                "q_max must be an integer >= 0",
+            ),
             (self.tracker in TRACKERS, f"tracker must be one of {TRACKERS}"),
-            (np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
-             "imagesp_pitch_m must be >= eps_m"),
+            (
+                np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
+                "imagesp_pitch_m must be >= eps_m",
+            ),
             (self.engine in ENGINES, f"engine must be one of {ENGINES}"),
-            (self.ray_test is None or isinstance(self.ray_test, bool), "ray_test must be True, False or None"),
+            (
+                self.ray_test is None or isinstance(self.ray_test, bool),
+                "ray_test must be True, False or None",
+            ),
         )
         for ok, message in checks:
             if not ok:
@@ -190,14 +201,23 @@ class IntervalTracker:
             return wrap_headings(self.limits(hull(boxes)[None], dt_s))
         motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
-        cells = imagesp(lambda b: motion(b, dt_s), boxes, s.eps_m, scale,
-                        pitch=s.imagesp_pitch_m / scale)
+        cells = imagesp(
+            lambda b: motion(b, dt_s), boxes, s.eps_m, scale, pitch=s.imagesp_pitch_m / scale
+        )
         return wrap_headings(cells)
 
     def _search(self, scan: SonarScan, initial: np.ndarray):
         s = self.settings
-        return gomne(scan, initial, s.eps_m, s.q_max, s.heading_scale_m_per_rad,
-                     guaranteed=s.guaranteed, engine=s.engine, ray_test=s.ray_test)
+        return gomne(
+            scan,
+            initial,
+            s.eps_m,
+            s.q_max,
+            s.heading_scale_m_per_rad,
+            guaranteed=s.guaranteed,
+            engine=s.engine,
+            ray_test=s.ray_test,
+        )
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
         """One epoch from the previous set (None: the start, or the epoch after one without a

@@ -119,7 +119,9 @@ def predict_core(f, jac_f, mean, cov, args, q_cov, angles, out_mean, out_cov) ->
 
 
 @numba.njit
-def update_core(h, jac_h, mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov) -> int:
+def update_core(
+    h, jac_h, mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov
+) -> int:
     """EKF update of every run in Joseph form (module docstring), ``h(x, args, out)``, ``H(x, args, out)``.
 
     ``mean (B, n)``, ``cov (B, n, n)``, ``z (B, m)``, ``args (B or 1, k)``,
@@ -203,30 +205,81 @@ BUILTIN_PROCESS_KERNELS = (
 def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
     """:func:`predict_core` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
-        return predict_core(kernels.cv_point, kernels.cv_jacobian_point, mean, cov, args, q_cov, angles, out_mean,
-                            out_cov)
+        return predict_core(
+            kernels.cv_point,
+            kernels.cv_jacobian_point,
+            mean,
+            cov,
+            args,
+            q_cov,
+            angles,
+            out_mean,
+            out_cov,
+        )
     if model == 1:
-        return predict_core(kernels.ctrv_point, kernels.ctrv_jacobian_point, mean, cov, args, q_cov, angles,
-                            out_mean, out_cov)
+        return predict_core(
+            kernels.ctrv_point,
+            kernels.ctrv_jacobian_point,
+            mean,
+            cov,
+            args,
+            q_cov,
+            angles,
+            out_mean,
+            out_cov,
+        )
     if model == 2:
-        return predict_core(kernels.ctra_point, kernels.ctra_jacobian_point, mean, cov, args, q_cov, angles,
-                            out_mean, out_cov)
-    return predict_core(kernels.cca_point, kernels.cca_jacobian_point, mean, cov, args, q_cov, angles, out_mean,
-                        out_cov)
+        return predict_core(
+            kernels.ctra_point,
+            kernels.ctra_jacobian_point,
+            mean,
+            cov,
+            args,
+            q_cov,
+            angles,
+            out_mean,
+            out_cov,
+        )
+    return predict_core(
+        kernels.cca_point,
+        kernels.cca_jacobian_point,
+        mean,
+        cov,
+        args,
+        q_cov,
+        angles,
+        out_mean,
+        out_cov,
+    )
 
 
 @numba.njit(cache=True)
 def _update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
-    return update_core(kernels.leading_entries_point, kernels.leading_entries_jacobian_point, mean, cov, z, args,
-                       r_cov, state_angles, angles, out_mean, out_cov)
+    return update_core(
+        kernels.leading_entries_point,
+        kernels.leading_entries_jacobian_point,
+        mean,
+        cov,
+        z,
+        args,
+        r_cov,
+        state_angles,
+        angles,
+        out_mean,
+        out_cov,
+    )
 
 
 #: Prediction entries by ``(f, F)`` kernels: ``(entry, number)``, called ``entry(number, ...)``;
 #: the built-ins' (cached on disk), then users' (:func:`predict_entry`).
-PREDICT_ENTRIES = {pair: (_predict_builtin, number) for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)}
+PREDICT_ENTRIES = {
+    pair: (_predict_builtin, number) for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
+}
 
 #: Update entries by ``(h, H)`` kernels: the built-in one (cached on disk), then users'.
-UPDATE_ENTRIES = {(kernels.leading_entries_point, kernels.leading_entries_jacobian_point): _update_leading_entries}
+UPDATE_ENTRIES = {
+    (kernels.leading_entries_point, kernels.leading_entries_jacobian_point): _update_leading_entries
+}
 
 
 def predict_entry(point, jacobian_point) -> tuple:
@@ -235,9 +288,13 @@ def predict_entry(point, jacobian_point) -> tuple:
     key = (point, jacobian_point)
     found = PREDICT_ENTRIES.get(key)
     if found is None:
+
         @numba.njit
         def entry(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
-            return predict_core(point, jacobian_point, mean, cov, args, q_cov, angles, out_mean, out_cov)
+            return predict_core(
+                point, jacobian_point, mean, cov, args, q_cov, angles, out_mean, out_cov
+            )
+
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -247,10 +304,23 @@ def update_entry(point, jacobian_point):
     key = (point, jacobian_point)
     entry = UPDATE_ENTRIES.get(key)
     if entry is None:
+
         @numba.njit
         def entry(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
-            return update_core(point, jacobian_point, mean, cov, z, args, r_cov, state_angles, angles, out_mean,
-                               out_cov)
+            return update_core(
+                point,
+                jacobian_point,
+                mean,
+                cov,
+                z,
+                args,
+                r_cov,
+                state_angles,
+                angles,
+                out_mean,
+                out_cov,
+            )
+
         UPDATE_ENTRIES[key] = entry
     return entry
 
@@ -275,8 +345,16 @@ def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], m
     key = (model.point, model.jacobian_point)
     entry, number = PREDICT_ENTRIES.get(key) or predict_entry(*key)
     try:
-        status = entry(number, read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)), packed, q_cov,
-                       angle_array(angle_indices), out_mean, out_cov)
+        status = entry(
+            number,
+            read_only(mean.reshape(runs, n)),
+            read_only(cov.reshape(runs, n, n)),
+            packed,
+            q_cov,
+            angle_array(angle_indices),
+            out_mean,
+            out_cov,
+        )
     except numba.core.errors.TypingError as exc:
         raise compile_error("EKF", "predict", key, exc) from None
     if status != OK:
@@ -284,7 +362,9 @@ def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], m
     return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
 
 
-def update(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple):
+def update(
+    mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple
+):
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
@@ -295,8 +375,12 @@ def update(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z,
     packed = pack_args(args, mean.shape[:-1])
     m = model.R.shape[-1]
     if (
-        runs == 0 or r_cov is None or packed is None
-        or not isinstance(z, np.ndarray) or z.shape != mean.shape[:-1] + (m,) or z.dtype.kind not in "biuf"
+        runs == 0
+        or r_cov is None
+        or packed is None
+        or not isinstance(z, np.ndarray)
+        or z.shape != mean.shape[:-1] + (m,)
+        or z.dtype.kind not in "biuf"
     ):
         return None
     n = mean.shape[-1]
@@ -304,9 +388,17 @@ def update(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z,
     key = (model.point, model.jacobian_point)
     entry = UPDATE_ENTRIES.get(key) or update_entry(*key)
     try:
-        status = entry(read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)),
-                       writable(z.reshape(runs, m)), packed, r_cov, angle_array(angle_indices),
-                       angle_array(model.angle_indices), out_mean, out_cov)
+        status = entry(
+            read_only(mean.reshape(runs, n)),
+            read_only(cov.reshape(runs, n, n)),
+            writable(z.reshape(runs, m)),
+            packed,
+            r_cov,
+            angle_array(angle_indices),
+            angle_array(model.angle_indices),
+            out_mean,
+            out_cov,
+        )
     except numba.core.errors.TypingError as exc:
         raise compile_error("EKF", "update", key, exc) from None
     if status != OK:

@@ -63,9 +63,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization.compiled_linalg import all_finite, cholesky_lower, gain_from_cross, wrap_angle, wrap_residual
-from localization.errors import EstimationError
 from localization import motion_models as kernels
+from localization.compiled_linalg import (
+    all_finite,
+    cholesky_lower,
+    gain_from_cross,
+    wrap_angle,
+    wrap_residual,
+)
+from localization.errors import EstimationError
 
 OK = 0
 NOT_POSITIVE_DEFINITE = 1
@@ -169,16 +175,29 @@ def predict_core(f, mean, cov, args, q_cov, weights, angles, out_mean, out_cov) 
     for b in range(runs):
         if not cholesky_lower(cov[b], chol):
             return NOT_POSITIVE_DEFINITE
-        _deviations(f, mean[b], chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, y0, dev)
-        _moments(dev, 2 * n, y0, weights, angles, q_cov[b if q_cov.shape[0] > 1 else 0], out_mean[b], out_cov[b],
-                 shift)
+        _deviations(
+            f, mean[b], chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, y0, dev
+        )
+        _moments(
+            dev,
+            2 * n,
+            y0,
+            weights,
+            angles,
+            q_cov[b if q_cov.shape[0] > 1 else 0],
+            out_mean[b],
+            out_cov[b],
+            shift,
+        )
         if not (all_finite(out_mean[b]) and all_finite(out_cov[b])):
             return NOT_FINITE
     return OK
 
 
 @numba.njit
-def augmented_predict_core(f, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov) -> int:
+def augmented_predict_core(
+    f, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov
+) -> int:
     """Augmented-noise prediction of every run, ``f(x, w, args, out)`` per point.
 
     As :func:`predict_core` with ``noise_sqrt (B or 1, q, q)`` a square root ``S S^T = Q``
@@ -228,7 +247,9 @@ def augmented_predict_core(f, mean, cov, args, noise_sqrt, weights, angles, out_
 
 
 @numba.njit
-def update_core(h, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov) -> int:
+def update_core(
+    h, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+) -> int:
     """Measurement update of every run (module docstring), ``h(x, args, out)`` per point.
 
     ``mean (B, n)``, ``cov (B, n, n)``, ``z (B, m)``, ``args (B or 1, k)``,
@@ -258,7 +279,17 @@ def update_core(h, mean, cov, z, args, r_cov, weights, state_angles, angles, out
             return NOT_POSITIVE_DEFINITE
         x = mean[b]
         _deviations(h, x, chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, z0, dev)
-        _moments(dev, 2 * n, z0, weights, angles, r_cov[b if r_cov.shape[0] > 1 else 0], z_pred, s_cov, shift)
+        _moments(
+            dev,
+            2 * n,
+            z0,
+            weights,
+            angles,
+            r_cov[b if r_cov.shape[0] > 1 else 0],
+            z_pred,
+            s_cov,
+            shift,
+        )
         scale = weights[1] * gamma
         for i in range(n):  # Pxz = W_i gamma L (D_{1..n} - D_{n+1..2n})
             for c in range(m):
@@ -314,32 +345,59 @@ BUILTIN_PROCESS_KERNELS = (
 def _predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
     """:func:`predict_core` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
-        return predict_core(kernels.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+        return predict_core(
+            kernels.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+        )
     if model == 1:
-        return predict_core(kernels.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+        return predict_core(
+            kernels.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+        )
     if model == 2:
-        return predict_core(kernels.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
-    return predict_core(kernels.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+        return predict_core(
+            kernels.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+        )
+    return predict_core(
+        kernels.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+    )
 
 
 @numba.njit(cache=True)
 def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
     """:func:`augmented_predict_core` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
-        return augmented_predict_core(kernels.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov)
+        return augmented_predict_core(
+            kernels.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+        )
     if model == 1:
-        return augmented_predict_core(kernels.ctrv_noisy_point, mean, cov, args, root, weights, angles, out_mean,
-                                      out_cov)
+        return augmented_predict_core(
+            kernels.ctrv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+        )
     if model == 2:
-        return augmented_predict_core(kernels.ctra_noisy_point, mean, cov, args, root, weights, angles, out_mean,
-                                      out_cov)
-    return augmented_predict_core(kernels.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov)
+        return augmented_predict_core(
+            kernels.ctra_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+        )
+    return augmented_predict_core(
+        kernels.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+    )
 
 
 @numba.njit(cache=True)
-def _update_leading_entries(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
-    return update_core(kernels.leading_entries_point, mean, cov, z, args, r_cov, weights, state_angles, angles,
-                       out_mean, out_cov)
+def _update_leading_entries(
+    mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+):
+    return update_core(
+        kernels.leading_entries_point,
+        mean,
+        cov,
+        z,
+        args,
+        r_cov,
+        weights,
+        state_angles,
+        angles,
+        out_mean,
+        out_cov,
+    )
 
 
 #: Prediction entries by (kernel, augmented): ``(entry, number)``, called ``entry(number, ...)``;
@@ -365,13 +423,20 @@ def predict_entry(point, augmented: bool) -> tuple:
     found = PREDICT_ENTRIES.get(key)
     if found is None:
         if augmented:
+
             @numba.njit
             def entry(model, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov):
-                return augmented_predict_core(point, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov)
+                return augmented_predict_core(
+                    point, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov
+                )
         else:
+
             @numba.njit
             def entry(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
-                return predict_core(point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+                return predict_core(
+                    point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+                )
+
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -380,9 +445,13 @@ def update_entry(point):
     """The compiled update entry of the measurement kernel ``point`` (as :func:`predict_entry`)."""
     entry = UPDATE_ENTRIES.get(point)
     if entry is None:
+
         @numba.njit
         def entry(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
-            return update_core(point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov)
+            return update_core(
+                point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+            )
+
         UPDATE_ENTRIES[point] = entry
     return entry
 
@@ -483,10 +552,15 @@ def compile_error(filter_name: str, kind: str, point, exc: Exception) -> Estimat
     points = point if isinstance(point, tuple) else (point,)
     names = " and ".join(getattr(p, "__name__", repr(p)) for p in points)
     if filter_name == "EKF":
-        expected = "h(x, args, out (m,)) and H(x, args, out (m, n))" if kind == "update" else (
-            "f(x, args, out (n,)) and F(x, args, out (n, n))")
+        expected = (
+            "h(x, args, out (m,)) and H(x, args, out (m, n))"
+            if kind == "update"
+            else ("f(x, args, out (n,)) and F(x, args, out (n, n))")
+        )
     else:
-        expected = "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
+        expected = (
+            "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
+        )
     return EstimationError(
         f"{filter_name} {kind}: the kernel {names} does not compile for this step (expected {expected} "
         f"on float64 arrays): {str(exc).strip().splitlines()[0]}"
@@ -500,7 +574,9 @@ def runs_of(mean: np.ndarray) -> int:
     return mean.shape[0] if mean.ndim == 2 else 0
 
 
-def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple):
+def predict(
+    weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple
+):
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``weights`` are the :class:`~localization.sigma_points.SigmaWeights` of the state (or of
@@ -516,10 +592,21 @@ def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int
         return None
     n = mean.shape[-1]
     out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
-    entry, number = PREDICT_ENTRIES.get((model.point, augmented)) or predict_entry(model.point, augmented)
+    entry, number = PREDICT_ENTRIES.get((model.point, augmented)) or predict_entry(
+        model.point, augmented
+    )
     try:
-        status = entry(number, read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)), packed, noise,
-                       weights.packed, angle_array(angle_indices), out_mean, out_cov)
+        status = entry(
+            number,
+            read_only(mean.reshape(runs, n)),
+            read_only(cov.reshape(runs, n, n)),
+            packed,
+            noise,
+            weights.packed,
+            angle_array(angle_indices),
+            out_mean,
+            out_cov,
+        )
     except numba.core.errors.TypingError as exc:
         raise compile_error("UKF", "predict", model.point, exc) from None
     if status != OK:
@@ -527,7 +614,15 @@ def predict(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int
     return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
 
 
-def update(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple):
+def update(
+    weights,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    angle_indices: tuple[int, ...],
+    z,
+    model,
+    args: tuple,
+):
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
@@ -538,17 +633,30 @@ def update(weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int,
     packed = pack_args(args, mean.shape[:-1])
     m = model.R.shape[-1]
     if (
-        runs == 0 or r_cov is None or packed is None
-        or not isinstance(z, np.ndarray) or z.shape != mean.shape[:-1] + (m,) or z.dtype.kind not in "biuf"
+        runs == 0
+        or r_cov is None
+        or packed is None
+        or not isinstance(z, np.ndarray)
+        or z.shape != mean.shape[:-1] + (m,)
+        or z.dtype.kind not in "biuf"
     ):
         return None
     n = mean.shape[-1]
     out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
     entry = UPDATE_ENTRIES.get(model.point) or update_entry(model.point)
     try:
-        status = entry(read_only(mean.reshape(runs, n)), read_only(cov.reshape(runs, n, n)),
-                       writable(z.reshape(runs, m)), packed, r_cov, weights.packed,
-                       angle_array(angle_indices), angle_array(model.angle_indices), out_mean, out_cov)
+        status = entry(
+            read_only(mean.reshape(runs, n)),
+            read_only(cov.reshape(runs, n, n)),
+            writable(z.reshape(runs, m)),
+            packed,
+            r_cov,
+            weights.packed,
+            angle_array(angle_indices),
+            angle_array(model.angle_indices),
+            out_mean,
+            out_cov,
+        )
     except numba.core.errors.TypingError as exc:
         raise compile_error("UKF", "update", model.point, exc) from None
     if status != OK:

@@ -100,17 +100,37 @@ from typing import Literal
 
 import numpy as np
 
+from localization.dead_reckoning_kernel import (
+    B_ACCEL,
+    B_GYRO,
+    D_WHEEL,
+    N_STATES,
+    OMEGA,
+    THETA,
+    V,
+    X,
+    Y,
+    run_steps,
+)
 from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.iukf import IteratedUnscentedKalmanFilter
-from localization.dead_reckoning_kernel import B_ACCEL, B_GYRO, D_WHEEL, N_STATES, OMEGA, THETA, V, X, Y, run_steps
 from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
 from localization.ukf import UnscentedKalmanFilter
 
-STATE_NAMES = ("x_m", "y_m", "theta_rad", "v_m_s", "omega_rad_s", "b_gyro_rad_s", "b_accel_m_s2", "d_wheel")
+STATE_NAMES = (
+    "x_m",
+    "y_m",
+    "theta_rad",
+    "v_m_s",
+    "omega_rad_s",
+    "b_gyro_rad_s",
+    "b_accel_m_s2",
+    "d_wheel",
+)
 ANGLE_INDICES = (THETA,)
 FILTERS = ("ukf", "iukf", "ekf", "iekf")
 _G_M_S2 = 9.80665
@@ -119,8 +139,14 @@ _WRAP_GAMMA = 0.01  # sigma-point spread from which the compiled step wraps head
 
 def _positive(owner: str, **values) -> None:
     for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
-            raise EstimationError(f"{owner}: {name} must be a positive finite number, got {value!r}")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not (math.isfinite(value) and value > 0)
+        ):
+            raise EstimationError(
+                f"{owner}: {name} must be a positive finite number, got {value!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -138,10 +164,16 @@ class NominalRobot:
     ticks_per_rev: int
 
     def __post_init__(self) -> None:
-        _positive("NominalRobot", wheel_radius_m=self.wheel_radius_m, wheel_base_m=self.wheel_base_m,
-                  ticks_per_rev=self.ticks_per_rev)
+        _positive(
+            "NominalRobot",
+            wheel_radius_m=self.wheel_radius_m,
+            wheel_base_m=self.wheel_base_m,
+            ticks_per_rev=self.ticks_per_rev,
+        )
         if int(self.ticks_per_rev) != self.ticks_per_rev:
-            raise EstimationError(f"NominalRobot: ticks_per_rev must be an integer, got {self.ticks_per_rev!r}")
+            raise EstimationError(
+                f"NominalRobot: ticks_per_rev must be an integer, got {self.ticks_per_rev!r}"
+            )
 
     @property
     def metres_per_tick(self) -> float:
@@ -183,49 +215,74 @@ class DeadReckoningNoise:
     heading_std_rad_sqrt_s: float = 1e-4
 
     def __post_init__(self) -> None:
-        _positive("DeadReckoningNoise", **{name: getattr(self, name) for name in self.__dataclass_fields__})
+        _positive(
+            "DeadReckoningNoise",
+            **{name: getattr(self, name) for name in self.__dataclass_fields__},
+        )
 
     def process_cov(self, dt_s: float) -> np.ndarray:
         """``Q (8, 8)``, diagonal, of one step of ``dt_s`` seconds."""
         accel_std = self.accel_noise_density_m_s2_sqrt_hz / math.sqrt(dt_s)  # per sample
-        return np.diag([
-            self.position_std_m_sqrt_s**2 * dt_s,
-            self.position_std_m_sqrt_s**2 * dt_s,
-            self.heading_std_rad_sqrt_s**2 * dt_s,
-            (accel_std * dt_s) ** 2,
-            (self.yaw_accel_std_rad_s2 * dt_s) ** 2,
-            self.gyro_bias_random_walk_rad_s_sqrt_s**2 * dt_s,
-            self.accel_bias_random_walk_m_s2_sqrt_s**2 * dt_s,
-            1e-12 * dt_s,  # the radii are constant; a trace of noise keeps the filter awake
-        ])
+        return np.diag(
+            [
+                self.position_std_m_sqrt_s**2 * dt_s,
+                self.position_std_m_sqrt_s**2 * dt_s,
+                self.heading_std_rad_sqrt_s**2 * dt_s,
+                (accel_std * dt_s) ** 2,
+                (self.yaw_accel_std_rad_s2 * dt_s) ** 2,
+                self.gyro_bias_random_walk_rad_s_sqrt_s**2 * dt_s,
+                self.accel_bias_random_walk_m_s2_sqrt_s**2 * dt_s,
+                1e-12 * dt_s,  # the radii are constant; a trace of noise keeps the filter awake
+            ]
+        )
 
     def measurement_cov(self, robot: NominalRobot, dt_s: float) -> np.ndarray:
         """``R (3, 3)`` of ``(v_enc, omega_enc, gyro)``: the wheels' errors are independent,
         so the speed (their mean) and the yaw rate (their difference) are uncorrelated."""
         wheel_std = self.tick_std * robot.metres_per_tick / dt_s  # one wheel's rim speed, m/s
         gyro_std = self.gyro_noise_density_rad_s_sqrt_hz / math.sqrt(dt_s)
-        return np.diag([0.5 * wheel_std**2, 2.0 * wheel_std**2 / robot.wheel_base_m**2, gyro_std**2])
+        return np.diag(
+            [0.5 * wheel_std**2, 2.0 * wheel_std**2 / robot.wheel_base_m**2, gyro_std**2]
+        )
 
     def prior_std(self) -> np.ndarray:
         """``(5,)`` prior standard deviations of the sensor states
         ``(b_gyro, b_accel, d_wheel)`` preceded by those of ``(v, omega)`` at rest (small)."""
-        return np.array([1e-3, 1e-3, self.gyro_bias_std_rad_s, self.accel_bias_std_m_s2,
-                         math.sqrt(2.0) * self.wheel_radius_rel_std])
+        return np.array(
+            [
+                1e-3,
+                1e-3,
+                self.gyro_bias_std_rad_s,
+                self.accel_bias_std_m_s2,
+                math.sqrt(2.0) * self.wheel_radius_rel_std,
+            ]
+        )
 
 
-def initial_belief(pose, pose_std, noise: DeadReckoningNoise = DeadReckoningNoise(), batch: int | None = 2) -> Gaussian:
+def initial_belief(
+    pose, pose_std, noise: DeadReckoningNoise = DeadReckoningNoise(), batch: int | None = 2
+) -> Gaussian:
     """The starting belief: the robot at rest at ``pose (3,)`` with standard deviations
     ``pose_std (3,)`` (m, m, rad), sensor states at their priors; ``batch`` copies (default 2:
     the UKF-only and the fused branch), ``None`` for one unbatched belief."""
     pose = np.asarray(pose, dtype=float)
     pose_std = np.asarray(pose_std, dtype=float)
-    if pose.shape != (3,) or pose_std.shape != (3,) or not (np.isfinite(pose).all() and (pose_std > 0).all()):
-        raise EstimationError(f"initial_belief: pose and pose_std must be finite (3,) arrays, pose_std > 0; "
-                              f"got {pose!r}, {pose_std!r}")
+    if (
+        pose.shape != (3,)
+        or pose_std.shape != (3,)
+        or not (np.isfinite(pose).all() and (pose_std > 0).all())
+    ):
+        raise EstimationError(
+            f"initial_belief: pose and pose_std must be finite (3,) arrays, pose_std > 0; "
+            f"got {pose!r}, {pose_std!r}"
+        )
     mean = np.concatenate([pose, np.zeros(5)])
     cov = np.diag(np.concatenate([pose_std, noise.prior_std()]) ** 2)
     if batch is not None:
-        mean, cov = np.broadcast_to(mean, (batch, N_STATES)), np.broadcast_to(cov, (batch, N_STATES, N_STATES))
+        mean, cov = (
+            np.broadcast_to(mean, (batch, N_STATES)),
+            np.broadcast_to(cov, (batch, N_STATES, N_STATES)),
+        )
     return Gaussian(mean, cov, ANGLE_INDICES)
 
 
@@ -334,8 +391,14 @@ class OdometryData:
         return MeasurementModel(measure, self.R, jacobian=measure_jacobian)
 
 
-def odometry_data(ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobot,
-                  noise: DeadReckoningNoise = DeadReckoningNoise()) -> OdometryData:
+def odometry_data(
+    ticks,
+    gyro_rad_s,
+    accel_m_s2,
+    dt_s: float,
+    robot: NominalRobot,
+    noise: DeadReckoningNoise = DeadReckoningNoise(),
+) -> OdometryData:
     """The per-sample inputs from the raw sensor arrays.
 
     Args:
@@ -354,7 +417,9 @@ def odometry_data(ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobo
     gyro = np.asarray(gyro_rad_s, dtype=float)
     accel = np.asarray(accel_m_s2, dtype=float)
     if ticks.ndim not in (2, 3) or ticks.shape[-1] != 2 or ticks.shape[0] < 1:
-        raise EstimationError(f"odometry_data: ticks must have shape (N, 2) or (N, B, 2), got {ticks.shape}")
+        raise EstimationError(
+            f"odometry_data: ticks must have shape (N, 2) or (N, B, 2), got {ticks.shape}"
+        )
     lead = ticks.shape[:-1]
     if gyro.shape != lead or accel.shape != lead + (2,):
         raise EstimationError(
@@ -364,7 +429,9 @@ def odometry_data(ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobo
     for name, values in (("ticks", ticks), ("gyro_rad_s", gyro), ("accel_m_s2", accel)):
         bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
         if bad.any():
-            raise EstimationError(f"odometry_data: {name} is not finite at sample {int(np.argmax(bad))}")
+            raise EstimationError(
+                f"odometry_data: {name} is not finite at sample {int(np.argmax(bad))}"
+            )
     rim = ticks.astype(float) * (robot.metres_per_tick / dt_s)  # wheel rim speeds, m/s
     v_enc = 0.5 * (rim[..., 0] + rim[..., 1])
     omega_enc = (rim[..., 1] - rim[..., 0]) / robot.wheel_base_m
@@ -372,8 +439,14 @@ def odometry_data(ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobo
     forward = accel[..., 0]
     accel_input = forward.copy()
     accel_input[1:] = 0.5 * (forward[1:] + forward[:-1])
-    return OdometryData(dt_s, accel_input, z, robot.wheel_base_m, noise.measurement_cov(robot, dt_s),
-                        noise.process_cov(dt_s))
+    return OdometryData(
+        dt_s,
+        accel_input,
+        z,
+        robot.wheel_base_m,
+        noise.measurement_cov(robot, dt_s),
+        noise.process_cov(dt_s),
+    )
 
 
 # --------------------------------------------------------------------------- the filters
@@ -399,7 +472,9 @@ class DeadReckoningSettings:
 
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
-            raise EstimationError(f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}")
+            raise EstimationError(
+                f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}"
+            )
         if self.engine not in ("compiled", "generic"):
             raise EstimationError(
                 f"DeadReckoningSettings: engine must be 'compiled' or 'generic', got {self.engine!r}"
@@ -468,15 +543,26 @@ class DeadReckoning:
         index: the sample of the current belief (starts at 0, the initial belief).
     """
 
-    def __init__(self, data: OdometryData, initial: Gaussian,
-                 settings: DeadReckoningSettings = DeadReckoningSettings(), record_full_cov: bool = False) -> None:
+    def __init__(
+        self,
+        data: OdometryData,
+        initial: Gaussian,
+        settings: DeadReckoningSettings = DeadReckoningSettings(),
+        record_full_cov: bool = False,
+    ) -> None:
         if not isinstance(initial, Gaussian) or initial.mean.ndim != 2 or initial.dim != N_STATES:
-            raise EstimationError(f"DeadReckoning: initial must be a batched Gaussian (B, {N_STATES})")
+            raise EstimationError(
+                f"DeadReckoning: initial must be a batched Gaussian (B, {N_STATES})"
+            )
         if initial.angle_indices != ANGLE_INDICES:
-            raise EstimationError(f"DeadReckoning: initial must declare angle_indices {ANGLE_INDICES}")
+            raise EstimationError(
+                f"DeadReckoning: initial must declare angle_indices {ANGLE_INDICES}"
+            )
         batch = initial.mean.shape[0]
         if data.per_run and data.z.shape[1] != batch:
-            raise EstimationError(f"DeadReckoning: the data hold {data.z.shape[1]} runs, the belief {batch}")
+            raise EstimationError(
+                f"DeadReckoning: the data hold {data.z.shape[1]} runs, the belief {batch}"
+            )
         self.data = data
         self.settings = settings
         self.index = 0
@@ -514,9 +600,14 @@ class DeadReckoning:
         Raises:
             EstimationError: a belief of another shape or with non-finite values.
         """
-        if (not isinstance(belief, Gaussian) or belief.mean.shape != self._mean.shape
-                or belief.angle_indices != ANGLE_INDICES):
-            raise EstimationError(f"DeadReckoning.replace: the belief must be a Gaussian {self._mean.shape}")
+        if (
+            not isinstance(belief, Gaussian)
+            or belief.mean.shape != self._mean.shape
+            or belief.angle_indices != ANGLE_INDICES
+        ):
+            raise EstimationError(
+                f"DeadReckoning.replace: the belief must be a Gaussian {self._mean.shape}"
+            )
         if not (np.isfinite(belief.mean).all() and np.isfinite(belief.cov).all()):
             raise EstimationError("DeadReckoning.replace: the belief is not finite")
         self._mean = np.array(belief.mean)
@@ -541,8 +632,13 @@ class DeadReckoning:
         if until_index >= start:
             if self.settings.engine == "compiled":
                 self._mean, self._cov, self._speed_correction = self._compiled.run(
-                    self._mean, self._cov, self._speed_correction, start, until_index + 1,
-                    self._mean_hist, self._cov_hist,
+                    self._mean,
+                    self._cov,
+                    self._speed_correction,
+                    start,
+                    until_index + 1,
+                    self._mean_hist,
+                    self._cov_hist,
                 )
             else:
                 self._run_generic(start, until_index + 1)
@@ -597,7 +693,11 @@ class _CompiledStep:
         self.unscented = settings.unscented
         if self.unscented:
             weights = settings.sigma_points().weights(N_STATES)
-            self.gamma, self.weight, self.c0 = float(weights.gamma), float(weights.wi), float(weights.c0)
+            self.gamma, self.weight, self.c0 = (
+                float(weights.gamma),
+                float(weights.wi),
+                float(weights.c0),
+            )
         else:
             self.gamma = self.weight = self.c0 = 0.0
         self.wrap_offsets = self.gamma >= _WRAP_GAMMA
@@ -608,15 +708,34 @@ class _CompiledStep:
         and returns the new ``(mean, cov, speed_correction)``."""
         mean, cov, speed_correction = mean.copy(), cov.copy(), speed_correction.copy()
         failed = run_steps(
-            mean, cov, speed_correction, start, stop, self.accel, self.z, self.q_cov, self.r_cov,
-            self.dt_s, self.wheel_base_m, self.unscented, self.gamma, self.weight, self.c0, self.wrap_offsets,
-            mean_hist, cov_hist,
+            mean,
+            cov,
+            speed_correction,
+            start,
+            stop,
+            self.accel,
+            self.z,
+            self.q_cov,
+            self.r_cov,
+            self.dt_s,
+            self.wheel_base_m,
+            self.unscented,
+            self.gamma,
+            self.weight,
+            self.c0,
+            self.wrap_offsets,
+            mean_hist,
+            cov_hist,
         )
         if failed >= 0:
             raise EstimationError(
                 f"dead reckoning: at sample {failed} the covariance is not positive definite or the mean not finite"
             )
-        if self.unscented and not self.wrap_offsets and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2:
+        if (
+            self.unscented
+            and not self.wrap_offsets
+            and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2
+        ):
             raise EstimationError(
                 "dead reckoning: the heading is too uncertain for the compiled step (gamma * sigma_theta >= pi); "
                 "use engine='generic' or sigma points with gamma >= 0.01"
@@ -624,9 +743,14 @@ class _CompiledStep:
         return mean, cov, speed_correction
 
 
-def run_dead_reckoning(data: OdometryData, initial: Gaussian,
-                       settings: DeadReckoningSettings = DeadReckoningSettings(),
-                       epochs=(), on_epoch=None, record_full_cov: bool = False) -> DeadReckoningHistory:
+def run_dead_reckoning(
+    data: OdometryData,
+    initial: Gaussian,
+    settings: DeadReckoningSettings = DeadReckoningSettings(),
+    epochs=(),
+    on_epoch=None,
+    record_full_cov: bool = False,
+) -> DeadReckoningHistory:
     """Run the filter over all samples of ``data``.
 
     Args:

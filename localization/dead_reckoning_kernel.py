@@ -36,7 +36,13 @@ import math
 import numba
 import numpy as np
 
-from localization.compiled_linalg import all_finite, cholesky_lower, kalman_gain_t, wrap_angle, wrap_residual
+from localization.compiled_linalg import (
+    all_finite,
+    cholesky_lower,
+    kalman_gain_t,
+    wrap_angle,
+    wrap_residual,
+)
 
 X, Y, THETA, V, OMEGA, B_GYRO, B_ACCEL, D_WHEEL = range(8)
 N_STATES = 8
@@ -59,8 +65,22 @@ def _transition(state, accel_m_s2, dt_s, out) -> None:
 
 
 @numba.njit(cache=True)
-def _unscented_predict(mean, cov, accel_m_s2, dt_s, gamma, weight, c0, wrap_offsets, q_cov,
-                       chol, point, image, dev, shift) -> bool:
+def _unscented_predict(
+    mean,
+    cov,
+    accel_m_s2,
+    dt_s,
+    gamma,
+    weight,
+    c0,
+    wrap_offsets,
+    q_cov,
+    chol,
+    point,
+    image,
+    dev,
+    shift,
+) -> bool:
     """``mean (8,)``, ``cov (8, 8)`` replaced by the unscented prediction (paper 001 eq. 25-27).
 
     ``weight`` is ``W_i = 1 / (2 gamma^2)``, ``c0 = Wc_0 - Wm_0``; ``chol (8, 8)``, ``point``,
@@ -139,8 +159,9 @@ def _linearised_predict(mean, cov, accel_m_s2, dt_s, q_cov, jac, product, image)
 
 
 @numba.njit(cache=True)
-def _linear_update(mean, cov, z, r_cov, wheel_base_m, speed_correction,
-                   h, cross, s_cov, s_chol, gain_t, innovation) -> bool:
+def _linear_update(
+    mean, cov, z, r_cov, wheel_base_m, speed_correction, h, cross, s_cov, s_chol, gain_t, innovation
+) -> bool:
     """The closed-form update of ``mean (8,)``, ``cov (8, 8)`` by ``z (3,)``; returns ``False``
     when ``S`` is not positive definite (then nothing is changed).
 
@@ -181,8 +202,26 @@ def _linear_update(mean, cov, z, r_cov, wheel_base_m, speed_correction,
 
 
 @numba.njit(cache=True)
-def run_steps(mean, cov, speed_correction, start, stop, accel_m_s2, z, q_cov, r_cov, dt_s, wheel_base_m,
-              unscented, gamma, weight, c0, wrap_offsets, mean_hist, cov_hist) -> int:
+def run_steps(
+    mean,
+    cov,
+    speed_correction,
+    start,
+    stop,
+    accel_m_s2,
+    z,
+    q_cov,
+    r_cov,
+    dt_s,
+    wheel_base_m,
+    unscented,
+    gamma,
+    weight,
+    c0,
+    wrap_offsets,
+    mean_hist,
+    cov_hist,
+) -> int:
     """Samples ``start..stop-1`` of every run; returns ``-1``, or the sample where a covariance
     to factorise (``P`` or ``S``) is not positive definite or the updated mean is not finite
     (the state then holds a mix of samples: discard it).
@@ -206,23 +245,64 @@ def run_steps(mean, cov, speed_correction, start, stop, accel_m_s2, z, q_cov, r_
     chol = np.empty((n, n))
     product = np.empty((n, n))
     dev = np.empty((2 * n, n))
-    point, image, shift, innovation = np.empty(n), np.empty(n), np.empty(n), np.empty(N_MEASUREMENTS)
-    h, gain_t, cross = np.empty((N_MEASUREMENTS, n)), np.empty((N_MEASUREMENTS, n)), np.empty((n, N_MEASUREMENTS))
-    s_cov, s_chol = np.empty((N_MEASUREMENTS, N_MEASUREMENTS)), np.empty((N_MEASUREMENTS, N_MEASUREMENTS))
+    point, image, shift, innovation = (
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(N_MEASUREMENTS),
+    )
+    h, gain_t, cross = (
+        np.empty((N_MEASUREMENTS, n)),
+        np.empty((N_MEASUREMENTS, n)),
+        np.empty((n, N_MEASUREMENTS)),
+    )
+    s_cov, s_chol = (
+        np.empty((N_MEASUREMENTS, N_MEASUREMENTS)),
+        np.empty((N_MEASUREMENTS, N_MEASUREMENTS)),
+    )
     shared_accel, shared_z = accel_m_s2.shape[1] == 1, z.shape[1] == 1
     for k in range(start, stop):
         for b in range(batch):
             x, p = mean[b], cov[b]
             accel = accel_m_s2[k, 0 if shared_accel else b]
             if unscented:
-                if not _unscented_predict(x, p, accel, dt_s, gamma, weight, c0, wrap_offsets, q_cov,
-                                          chol, point, image, dev, shift):
+                if not _unscented_predict(
+                    x,
+                    p,
+                    accel,
+                    dt_s,
+                    gamma,
+                    weight,
+                    c0,
+                    wrap_offsets,
+                    q_cov,
+                    chol,
+                    point,
+                    image,
+                    dev,
+                    shift,
+                ):
                     return k
             else:
                 _linearised_predict(x, p, accel, dt_s, q_cov, chol, product, image)
             predicted_v = x[V]
-            if not (_linear_update(x, p, z[k, 0 if shared_z else b], r_cov, wheel_base_m, speed_correction[b],
-                                   h, cross, s_cov, s_chol, gain_t, innovation) and all_finite(x)):
+            if not (
+                _linear_update(
+                    x,
+                    p,
+                    z[k, 0 if shared_z else b],
+                    r_cov,
+                    wheel_base_m,
+                    speed_correction[b],
+                    h,
+                    cross,
+                    s_cov,
+                    s_chol,
+                    gain_t,
+                    innovation,
+                )
+                and all_finite(x)
+            ):
                 return k
             speed_correction[b] = x[V] - predicted_v
             for i in range(n):

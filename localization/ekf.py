@@ -48,7 +48,9 @@ from localization.ukf import check_args
 def compiled_path(model: ProcessModel | MeasurementModel) -> bool:
     """Whether a step with ``model`` may take the compiled path (both kernels and the numpy
     Jacobian, the reference, are there)."""
-    return model.jacobian_point is not None and model.point is not None and model.jacobian is not None
+    return (
+        model.jacobian_point is not None and model.point is not None and model.jacobian is not None
+    )
 
 
 def _require_jacobian(model: ProcessModel | MeasurementModel, step: str) -> None:
@@ -79,7 +81,9 @@ def kalman_gain(cov: np.ndarray, jac: np.ndarray, r_cov: np.ndarray) -> np.ndarr
     return np.swapaxes(np.linalg.solve(jac @ cross + r_cov, cross.mT), -1, -2)
 
 
-def joseph_covariance(cov: np.ndarray, gain: np.ndarray, jac: np.ndarray, r_cov: np.ndarray) -> np.ndarray:
+def joseph_covariance(
+    cov: np.ndarray, gain: np.ndarray, jac: np.ndarray, r_cov: np.ndarray
+) -> np.ndarray:
     """``(I - K H) P (I - K H)^T + K R K^T`` (symmetrised), positive definite by construction."""
     a = np.eye(cov.shape[-1]) - gain @ jac
     new_cov = a @ cov @ a.mT + gain @ r_cov @ gain.mT
@@ -105,7 +109,9 @@ class ExtendedKalmanFilter:
             EstimationError: no Jacobian, non-finite ``z``, ``args`` or result.
         """
         if compiled_path(model):
-            done = compiled_ekf.update(belief.mean, belief.cov, belief.angle_indices, z, model, args)
+            done = compiled_ekf.update(
+                belief.mean, belief.cov, belief.angle_indices, z, model, args
+            )
             if done is not None:
                 return Gaussian.trusted(*done, belief.angle_indices)
         step = "EKF update"
@@ -115,7 +121,9 @@ class ExtendedKalmanFilter:
         innovation = model.residual(z, model.h(belief.mean, *args), step)
         jac = model.jacobian(belief.mean, *args)
         gain = kalman_gain(belief.cov, jac, model.R)
-        mean = wrap_columns(belief.mean + (gain @ innovation[..., None])[..., 0], belief.angle_indices)
+        mean = wrap_columns(
+            belief.mean + (gain @ innovation[..., None])[..., 0], belief.angle_indices
+        )
         cov = joseph_covariance(belief.cov, gain, jac, model.R)
         require_finite(mean, "the updated mean", step)
         return Gaussian.trusted(mean, cov, belief.angle_indices)
@@ -137,13 +145,24 @@ class IterationSettings:
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
-            raise EstimationError(f"IterationSettings: max_iterations must be an int >= 1, got {self.max_iterations!r}")
-        if self.tolerance is not None and not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
-            raise EstimationError(f"IterationSettings: tolerance must be finite and > 0 or None, got {self.tolerance!r}")
+            raise EstimationError(
+                f"IterationSettings: max_iterations must be an int >= 1, got {self.max_iterations!r}"
+            )
+        if self.tolerance is not None and not (
+            math.isfinite(self.tolerance) and self.tolerance > 0.0
+        ):
+            raise EstimationError(
+                f"IterationSettings: tolerance must be finite and > 0 or None, got {self.tolerance!r}"
+            )
 
 
 def iterated_update(
-    belief: Gaussian, z: np.ndarray, model: MeasurementModel, args: tuple, settings: IterationSettings, step: str
+    belief: Gaussian,
+    z: np.ndarray,
+    model: MeasurementModel,
+    args: tuple,
+    settings: IterationSettings,
+    step: str,
 ) -> Gaussian:
     """The Gauss-Newton measurement update of paper 000 eq. 11-12 (see the module docstring).
 
@@ -173,7 +192,9 @@ def iterated_update(
         gain = gain_l if gain is None else np.where(mask[..., None], gain_l, gain)
         jac = jac_l if jac is None else np.where(mask[..., None], jac_l, jac)
         if settings.tolerance is not None:
-            active = active & (step_size > settings.tolerance * (1.0 + np.abs(new_iterate).max(axis=-1)))
+            active = active & (
+                step_size > settings.tolerance * (1.0 + np.abs(new_iterate).max(axis=-1))
+            )
             if not active.any():
                 break
     if settings.tolerance is not None and active.any():

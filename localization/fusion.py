@@ -91,7 +91,9 @@ def check_boxes(boxes, labels=None) -> tuple[np.ndarray, np.ndarray]:
     if (boxes[..., 0] > boxes[..., 1]).any():
         raise EstimationError("fusion: a box has a lower bound above its upper bound")
     labels = np.zeros(len(boxes), dtype=np.int64) if labels is None else np.asarray(labels)
-    if labels.shape != (len(boxes),) or (labels.size and not np.issubdtype(labels.dtype, np.integer)):
+    if labels.shape != (len(boxes),) or (
+        labels.size and not np.issubdtype(labels.dtype, np.integer)
+    ):
         raise EstimationError(
             f"fusion: labels must be integers of shape ({len(boxes)},), got {labels.dtype} {labels.shape}"
         )
@@ -122,7 +124,9 @@ def nearest_component(points, boxes, labels) -> tuple[np.ndarray, np.ndarray, np
     in_component = member[None, :, None] == np.arange(len(names))[None, None, :]  # (1, K, C)
     per_component = np.where(in_component, distance[:, :, None], np.inf).min(axis=1)  # (P, C)
     chosen = np.argmin(per_component, axis=1)  # first = smallest label on ties
-    lower = np.where(in_component[..., None], boxes[:, None, :, 0][None], np.inf).min(axis=1)  # (1, C, 3)
+    lower = np.where(in_component[..., None], boxes[:, None, :, 0][None], np.inf).min(
+        axis=1
+    )  # (1, C, 3)
     upper = np.where(in_component[..., None], boxes[:, None, :, 1][None], -np.inf).max(axis=1)
     hulls = np.stack([lower[0], upper[0]], axis=-1)  # (C, 3, 2)
     return names[chosen], per_component[np.arange(len(points)), chosen], hulls[chosen]
@@ -188,12 +192,20 @@ def truncate_coordinate(mean, cov, index: int, lower, upper) -> tuple[np.ndarray
     new_mu, new_var = mu + std * shift, var * ratio
     column = cov[:, :, index]  # (P, n)
     mean = mean + column * ((new_mu - mu) / var)[:, None]
-    cov = cov - column[:, :, None] * column[:, None, :] * ((1.0 - new_var / var) / var)[:, None, None]
+    cov = (
+        cov - column[:, :, None] * column[:, None, :] * ((1.0 - new_var / var) / var)[:, None, None]
+    )
     return mean, 0.5 * (cov + cov.mT)
 
 
-def fuse(belief: Gaussian, boxes, labels=None, rows=(1,), rule: str = "clamp",
-         on_empty: Literal["raise", "skip"] = "raise") -> tuple[Gaussian, FusionReport]:
+def fuse(
+    belief: Gaussian,
+    boxes,
+    labels=None,
+    rows=(1,),
+    rule: str = "clamp",
+    on_empty: Literal["raise", "skip"] = "raise",
+) -> tuple[Gaussian, FusionReport]:
     """Fuse the rows ``rows`` of the batched ``belief (B, n)`` with the interval boxes.
 
     The first three states of the belief must be ``(x_m, y_m, theta_rad)`` (as in
@@ -218,11 +230,20 @@ def fuse(belief: Gaussian, boxes, labels=None, rows=(1,), rule: str = "clamp",
     if on_empty not in ("raise", "skip"):
         raise EstimationError(f"fusion: on_empty must be 'raise' or 'skip', got {on_empty!r}")
     if not isinstance(belief, Gaussian) or belief.mean.ndim != 2 or belief.dim < 3:
-        raise EstimationError("fusion: the belief must be a batched Gaussian (B, n) with the pose first")
+        raise EstimationError(
+            "fusion: the belief must be a batched Gaussian (B, n) with the pose first"
+        )
     rows = np.asarray(rows, dtype=np.int64).reshape(-1)
     batch = belief.mean.shape[0]
-    if rows.size == 0 or (rows < 0).any() or (rows >= batch).any() or len(np.unique(rows)) != rows.size:
-        raise EstimationError(f"fusion: rows must be distinct indices in [0, {batch}), got {rows.tolist()}")
+    if (
+        rows.size == 0
+        or (rows < 0).any()
+        or (rows >= batch).any()
+        or len(np.unique(rows)) != rows.size
+    ):
+        raise EstimationError(
+            f"fusion: rows must be distinct indices in [0, {batch}), got {rows.tolist()}"
+        )
     boxes, labels = check_boxes(boxes, labels)
     count = rows.size
     if len(boxes) == 0:
@@ -233,21 +254,31 @@ def fuse(belief: Gaussian, boxes, labels=None, rows=(1,), rule: str = "clamp",
             )
         unmoved = np.zeros(count, dtype=bool)
         return belief, FusionReport(
-            rows, np.full(count, -1), np.full(count, np.nan), unmoved, unmoved, True, np.full((count, 3, 2), np.nan)
+            rows,
+            np.full(count, -1),
+            np.full(count, np.nan),
+            unmoved,
+            unmoved,
+            True,
+            np.full((count, 3, 2), np.nan),
         )
 
     mean = np.array(belief.mean)
     cov = np.array(belief.cov)
     fused_mean, fused_cov = mean[rows], cov[rows]
     label, distance, hull = nearest_component(fused_mean[:, :2], boxes, labels)
-    inside = (fused_mean[:, :2] >= hull[:, :2, 0]).all(axis=1) & (fused_mean[:, :2] <= hull[:, :2, 1]).all(axis=1)
+    inside = (fused_mean[:, :2] >= hull[:, :2, 0]).all(axis=1) & (
+        fused_mean[:, :2] <= hull[:, :2, 1]
+    ).all(axis=1)
     with_heading = rule.endswith("_heading")
     theta = fused_mean[:, 2]
     heading_moved = np.zeros(count, dtype=bool)
     if with_heading:
         heading_moved = clamp_heading(theta, hull[:, 2]) != theta
     if rule.startswith("clamp"):
-        fused_mean[:, :2] = np.clip(fused_mean[:, :2], hull[:, :2, 0], hull[:, :2, 1])  # nearest point of the box
+        fused_mean[:, :2] = np.clip(
+            fused_mean[:, :2], hull[:, :2, 0], hull[:, :2, 1]
+        )  # nearest point of the box
         if with_heading:
             fused_mean[:, 2] = clamp_heading(theta, hull[:, 2])
     else:

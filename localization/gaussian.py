@@ -68,7 +68,9 @@ class Gaussian:
         mean.setflags(write=False)
         cov.setflags(write=False)
         belief = object.__new__(cls)
-        belief.__dict__.update(mean=mean, cov=cov, angle_indices=angle_indices)  # frozen: bypass __setattr__
+        belief.__dict__.update(
+            mean=mean, cov=cov, angle_indices=angle_indices
+        )  # frozen: bypass __setattr__
         return belief
 
     @property

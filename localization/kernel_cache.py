@@ -22,7 +22,11 @@ import hashlib
 from pathlib import Path
 
 KERNEL_SOURCES = (
-    "compiled_linalg.py", "compiled_ukf.py", "compiled_ekf.py", "motion_models.py", "dead_reckoning_kernel.py"
+    "compiled_linalg.py",
+    "compiled_ukf.py",
+    "compiled_ekf.py",
+    "motion_models.py",
+    "dead_reckoning_kernel.py",
 )
 """The files whose compiled code numba's cache entries of this package contain."""
 

@@ -37,7 +37,9 @@ def wrap_angle(angle_rad: np.ndarray) -> np.ndarray:
     ``(a + pi) % 2 pi`` can round up to exactly ``2 pi`` for ``a`` just below ``-pi``; that
     result (``+pi``) is moved to ``-pi`` so the half-open range holds at the edge too.
     """
-    wrapped = np.add(angle_rad, math.pi)  # a new array (or numpy float): the steps below work in place
+    wrapped = np.add(
+        angle_rad, math.pi
+    )  # a new array (or numpy float): the steps below work in place
     wrapped %= TWO_PI
     wrapped -= math.pi
     if wrapped.size and wrapped.max() >= math.pi:  # rare: one comparison pass in the common case
@@ -105,7 +107,9 @@ class PDPolicy:
 
     def __post_init__(self) -> None:
         if self.action not in ("raise", "repair"):
-            raise EstimationError(f"PDPolicy: action must be 'raise' or 'repair', got {self.action!r}")
+            raise EstimationError(
+                f"PDPolicy: action must be 'raise' or 'repair', got {self.action!r}"
+            )
         if not (math.isfinite(self.relative_jitter) and self.relative_jitter > 0.0):
             raise EstimationError(
                 f"PDPolicy: relative_jitter must be finite and > 0, got {self.relative_jitter!r}"

@@ -49,14 +49,18 @@ from localization.linalg import symmetrise, wrap_columns
 def _check_kernel(owner: str, point, name: str = "point") -> None:
     """Refuse a kernel ``name`` that is not a numba-compiled function (or ``None``)."""
     if point is not None and not isinstance(point, numba.core.registry.CPUDispatcher):
-        raise EstimationError(f"{owner}: {name} must be a numba.njit-compiled function or None, got {point!r}")
+        raise EstimationError(
+            f"{owner}: {name} must be a numba.njit-compiled function or None, got {point!r}"
+        )
 
 
 def _noise_covariance(matrix: np.ndarray, owner: str, name: str) -> np.ndarray:
     """``matrix (..., k, k)`` as a read-only symmetric float array; refuse non-finite or non-PSD."""
     out = np.array(matrix, dtype=float)
     if out.ndim < 2 or out.shape[-1] != out.shape[-2] or out.shape[-1] == 0:
-        raise EstimationError(f"{owner}: {name} must have shape (..., k, k) with k >= 1, got {out.shape}")
+        raise EstimationError(
+            f"{owner}: {name} must have shape (..., k, k) with k >= 1, got {out.shape}"
+        )
     if not np.isfinite(out).all():
         raise EstimationError(f"{owner}: {name} is not finite (NaN or inf)")
     out = symmetrise(out)
@@ -99,7 +103,9 @@ class ProcessModel:
         if self.jacobian is not None and not callable(self.jacobian):
             raise EstimationError("ProcessModel: jacobian must be callable or None")
         if self.noise not in ("additive", "augmented"):
-            raise EstimationError(f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}")
+            raise EstimationError(
+                f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}"
+            )
         _check_kernel("ProcessModel", self.point)
         _check_kernel("ProcessModel", self.jacobian_point, "jacobian_point")
         q_cov = _noise_covariance(self.Q, "ProcessModel", "Q")

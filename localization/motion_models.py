@@ -92,7 +92,9 @@ _SERIES_BELOW = 0.1
 
 def _sin_moment_series(order: int, terms: int = 5) -> tuple[float, ...]:
     """Taylor coefficients of ``M_k^s(u) / u`` in powers of ``u^2`` (truncation < 1e-18 at 0.1)."""
-    return tuple((-1.0) ** j / (math.factorial(2 * j + 1) * (2 * j + order + 2)) for j in range(terms))
+    return tuple(
+        (-1.0) ** j / (math.factorial(2 * j + 1) * (2 * j + order + 2)) for j in range(terms)
+    )
 
 
 _M1S_OVER_U = _sin_moment_series(1)  # 1/3 - u^2/30 + ...
@@ -141,7 +143,9 @@ def trig_moments(u: Array, max_order: int = 2) -> tuple[list[Array], list[Array]
         sin_moments.append(u * m1s_over_u)
     if max_order >= 2:
         cos_moments.append(sinc_u - 2.0 * m1s_over_u)
-        m2s_over_u = np.where(small, _horner(u2, _M2S_OVER_U), (2.0 * cos_moments[1] - cos_u) / u2_safe)
+        m2s_over_u = np.where(
+            small, _horner(u2, _M2S_OVER_U), (2.0 * cos_moments[1] - cos_u) / u2_safe
+        )
         sin_moments.append(u * m2s_over_u)
     return cos_moments, sin_moments
 
@@ -682,15 +686,26 @@ def cca_jacobian_point(x, args, out) -> None:
 
 def gps_model(R: Array) -> MeasurementModel:
     """The GPS position model ``(x_m, y_m)`` with noise ``R (2, 2)`` (m^2), with its kernels."""
-    return MeasurementModel(gps_position, R, jacobian=gps_jacobian, point=leading_entries_point,
-                            jacobian_point=leading_entries_jacobian_point)
+    return MeasurementModel(
+        gps_position,
+        R,
+        jacobian=gps_jacobian,
+        point=leading_entries_point,
+        jacobian_point=leading_entries_jacobian_point,
+    )
 
 
 def pose_model(R: Array) -> MeasurementModel:
     """The pose model ``(x_m, y_m, theta_rad)`` (CTRV, CTRA, CCA; heading an angle) with noise
     ``R (3, 3)`` (m^2, m^2, rad^2), with its kernels."""
-    return MeasurementModel(pose_measurement, R, jacobian=pose_jacobian, angle_indices=(2,),
-                            point=leading_entries_point, jacobian_point=leading_entries_jacobian_point)
+    return MeasurementModel(
+        pose_measurement,
+        R,
+        jacobian=pose_jacobian,
+        angle_indices=(2,),
+        point=leading_entries_point,
+        jacobian_point=leading_entries_jacobian_point,
+    )
 
 
 # ----------------------------------------------------------------------------- the records
@@ -735,7 +750,11 @@ class MotionModel:
     def __post_init__(self) -> None:
         q = len(self.noise_names)
         first = self.noise_indices[0] if self.noise_indices else -1
-        if q == 0 or len(self.noise_intensity) != q or self.noise_indices != tuple(range(first, first + q)):
+        if (
+            q == 0
+            or len(self.noise_intensity) != q
+            or self.noise_indices != tuple(range(first, first + q))
+        ):
             raise EstimationError(
                 f"{self.name}: noise_indices {self.noise_indices} must be {q} consecutive entries, "
                 f"one per noise variable, with one intensity each"
@@ -775,9 +794,17 @@ class MotionModel:
         UKF takes its compiled path (the step's argument is ``dt_s``); additive, the EKF too.
         """
         if noise == "augmented":
-            return ProcessModel(self.transition_with_noise, Q, noise="augmented", point=self.noisy_point)
-        return ProcessModel(self.transition, Q, jacobian=self.jacobian, noise=noise, point=self.point,
-                            jacobian_point=self.jacobian_point)
+            return ProcessModel(
+                self.transition_with_noise, Q, noise="augmented", point=self.noisy_point
+            )
+        return ProcessModel(
+            self.transition,
+            Q,
+            jacobian=self.jacobian,
+            noise=noise,
+            point=self.point,
+            jacobian_point=self.jacobian_point,
+        )
 
 
 CV = MotionModel(

@@ -49,7 +49,9 @@ class LinearSubsystem:
 
     def __post_init__(self) -> None:
         if not (isinstance(self.n_linear, int) and self.n_linear >= 1):
-            raise EstimationError(f"LinearSubsystem: n_linear must be an int >= 1, got {self.n_linear!r}")
+            raise EstimationError(
+                f"LinearSubsystem: n_linear must be an int >= 1, got {self.n_linear!r}"
+            )
         if not (callable(self.transition) and callable(self.observation)):
             raise EstimationError("LinearSubsystem: transition and observation must be callable")
 
@@ -87,7 +89,9 @@ class ModifiedKalmanFilter:
 
     def __post_init__(self) -> None:
         if not isinstance(self.inner, (UnscentedKalmanFilter, ExtendedKalmanFilter)):
-            raise EstimationError("ModifiedKalmanFilter: inner must be an UnscentedKalmanFilter or ExtendedKalmanFilter")
+            raise EstimationError(
+                "ModifiedKalmanFilter: inner must be an UnscentedKalmanFilter or ExtendedKalmanFilter"
+            )
         if not isinstance(self.subsystem, LinearSubsystem):
             raise EstimationError("ModifiedKalmanFilter: subsystem must be a LinearSubsystem")
 
@@ -100,10 +104,14 @@ class ModifiedKalmanFilter:
         """Both algorithms start from ``belief`` (Algorithm II from its linear block)."""
         n = self.subsystem.n_linear
         if belief.dim <= n:
-            raise EstimationError(f"{self.name}: the state must have more than n_linear = {n} components")
+            raise EstimationError(
+                f"{self.name}: the state must have more than n_linear = {n} components"
+            )
         if any(i < n for i in belief.angle_indices):
             raise EstimationError(f"{self.name}: the linear components cannot be angles")
-        return ModifiedBelief(belief, Gaussian.trusted(belief.mean[..., :n], belief.cov[..., :n, :n], ()))
+        return ModifiedBelief(
+            belief, Gaussian.trusted(belief.mean[..., :n], belief.cov[..., :n, :n], ())
+        )
 
     def predict(self, belief: ModifiedBelief, model: ProcessModel, *args) -> ModifiedBelief:
         """Algorithm I prediction about ``(x^(k-1), y~(k-1))``; Algorithm II with ``F(y~(k-1))`` (eq. 21).
@@ -125,7 +133,9 @@ class ModifiedKalmanFilter:
         require_finite(mean, "the predicted linear mean", step)
         return ModifiedBelief(full_pred, Gaussian.trusted(mean, symmetrise(cov), ()))
 
-    def update(self, belief: ModifiedBelief, z: np.ndarray, model: MeasurementModel, *args) -> ModifiedBelief:
+    def update(
+        self, belief: ModifiedBelief, z: np.ndarray, model: MeasurementModel, *args
+    ) -> ModifiedBelief:
         """Algorithm I update; Algorithm II with ``H(x~(k|k-1), y~(k|k-1))`` (eq. 21).
 
         Raises:
@@ -139,7 +149,9 @@ class ModifiedKalmanFilter:
         full_upd = self.inner.update(belief.full, z, model, *args)
         linear = belief.linear
         gain = kalman_gain(linear.cov, observation, model.R)
-        innovation = np.asarray(z, dtype=float) - (observation @ linear.mean[..., None])[..., 0]  # no angles
+        innovation = (
+            np.asarray(z, dtype=float) - (observation @ linear.mean[..., None])[..., 0]
+        )  # no angles
         mean = linear.mean + (gain @ innovation[..., None])[..., 0]
         cov = joseph_covariance(linear.cov, gain, observation, model.R)
         return ModifiedBelief(full_upd, Gaussian.trusted(mean, cov, ()))

@@ -102,8 +102,13 @@ def _weights(n: int, gamma2: float, c0: float) -> SigmaWeights:
     deviation_weights.flags.writeable = False
     offsets.flags.writeable = False
     return SigmaWeights(
-        n=n, gamma=gamma, wm0=1.0 - n / gamma2, wi=0.5 / gamma2, c0=c0,
-        deviation_weights=deviation_weights, offsets=offsets,
+        n=n,
+        gamma=gamma,
+        wm0=1.0 - n / gamma2,
+        wi=0.5 / gamma2,
+        c0=c0,
+        deviation_weights=deviation_weights,
+        offsets=offsets,
     )
 
 
@@ -121,7 +126,9 @@ def _resolved_kappa(owner: str, n: int, kappa: float | None) -> float:
     return kappa
 
 
-def _per_dimension(build: Callable[[object, int], SigmaWeights]) -> Callable[[object, int], SigmaWeights]:
+def _per_dimension(
+    build: Callable[[object, int], SigmaWeights],
+) -> Callable[[object, int], SigmaWeights]:
     """``weights(self, n)`` cached in the instance's ``__dict__`` (a frozen dataclass allows that).
 
     A dictionary lookup per step: ``functools.lru_cache`` would hash the settings dataclass on
@@ -156,11 +163,15 @@ class ScaledSigmaPoints:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.alpha) and self.alpha > 0.0):
-            raise EstimationError(f"ScaledSigmaPoints: alpha must be finite and > 0, got {self.alpha!r}")
+            raise EstimationError(
+                f"ScaledSigmaPoints: alpha must be finite and > 0, got {self.alpha!r}"
+            )
         if not math.isfinite(self.beta):
             raise EstimationError(f"ScaledSigmaPoints: beta must be finite, got {self.beta!r}")
         if self.kappa is not None and not math.isfinite(self.kappa):
-            raise EstimationError(f"ScaledSigmaPoints: kappa must be finite or None, got {self.kappa!r}")
+            raise EstimationError(
+                f"ScaledSigmaPoints: kappa must be finite or None, got {self.kappa!r}"
+            )
 
     @_per_dimension
     def weights(self, n: int) -> SigmaWeights:
@@ -182,7 +193,9 @@ class KappaSigmaPoints:
 
     def __post_init__(self) -> None:
         if self.kappa is not None and not math.isfinite(self.kappa):
-            raise EstimationError(f"KappaSigmaPoints: kappa must be finite or None, got {self.kappa!r}")
+            raise EstimationError(
+                f"KappaSigmaPoints: kappa must be finite or None, got {self.kappa!r}"
+            )
 
     @_per_dimension
     def weights(self, n: int) -> SigmaWeights:
@@ -264,7 +277,9 @@ def unscented_moments(
     for i in angle_indices:
         column = dev[..., i]
         # the largest |D| (one run: by Python, a third of the cost); a NaN may take either branch
-        largest = max(map(abs, column.tolist())) if column.ndim == 1 else np.abs(column).max(initial=0.0)
+        largest = (
+            max(map(abs, column.tolist())) if column.ndim == 1 else np.abs(column).max(initial=0.0)
+        )
         if not largest < 3.0:
             dev[..., i] = wrap_residual(column)
     shift = stacked[..., k, :]

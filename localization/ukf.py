@@ -75,7 +75,8 @@ def at_sigma_points(args: tuple, batch_shape: tuple[int, ...]) -> tuple:
         return args
     d = len(batch_shape)
     return tuple(
-        np.expand_dims(a, d) if isinstance(a, np.ndarray) and a.shape[:d] == batch_shape else a for a in args
+        np.expand_dims(a, d) if isinstance(a, np.ndarray) and a.shape[:d] == batch_shape else a
+        for a in args
     )
 
 
@@ -90,7 +91,11 @@ def check_args(args: tuple, step: str) -> None:
 
 
 def kalman_correction(
-    mean: np.ndarray, cov: np.ndarray, innovation: np.ndarray, cross_cov: np.ndarray, innovation_cov: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    innovation: np.ndarray,
+    cross_cov: np.ndarray,
+    innovation_cov: np.ndarray,
     angle_indices: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray]:
     """``x + K y`` and ``P - Pxz K^T`` (symmetrised) with ``K = Pxz S^-1`` solved (shared by UKF variants).
@@ -132,7 +137,9 @@ def run_slices(batch_shape: tuple[int, ...], noise_cov: np.ndarray) -> list[slic
 
 def sliced_args(args: tuple, runs: int, part: slice) -> tuple:
     """The step's arguments for the runs ``part``: per-run arrays (leading axis ``runs``) sliced."""
-    return tuple(a[part] if isinstance(a, np.ndarray) and a.shape[:1] == (runs,) else a for a in args)
+    return tuple(
+        a[part] if isinstance(a, np.ndarray) and a.shape[:1] == (runs,) else a for a in args
+    )
 
 
 def joined(beliefs: list[Gaussian], angle_indices: tuple[int, ...]) -> Gaussian:
@@ -166,12 +173,17 @@ class UnscentedKalmanFilter:
         n = mean.shape[-1]
         if model.point is not None:
             dim = n + model.Q.shape[-1] if model.noise == "augmented" else n
-            done = compiled_ukf.predict(self.points.weights(dim), mean, belief.cov, belief.angle_indices, model, args)
+            done = compiled_ukf.predict(
+                self.points.weights(dim), mean, belief.cov, belief.angle_indices, model, args
+            )
             if done is not None:
                 return Gaussian.trusted(*done, belief.angle_indices)
         batch = mean.shape[:-1]
         if len(batch) == 1 and batch[0] > SLICE_RUNS and (parts := run_slices(batch, model.Q)):
-            steps = [self.predict(belief[part], model, *sliced_args(args, batch[0], part)) for part in parts]
+            steps = [
+                self.predict(belief[part], model, *sliced_args(args, batch[0], part))
+                for part in parts
+            ]
             return joined(steps, belief.angle_indices)
         check_args(args, "UKF predict")
         chol, _ = cholesky(belief.cov, self.pd_policy, "UKF predict")
@@ -205,16 +217,28 @@ class UnscentedKalmanFilter:
         mean = belief.mean
         if model.point is not None:
             done = compiled_ukf.update(
-                self.points.weights(mean.shape[-1]), mean, belief.cov, belief.angle_indices, z, model, args
+                self.points.weights(mean.shape[-1]),
+                mean,
+                belief.cov,
+                belief.angle_indices,
+                z,
+                model,
+                args,
             )
             if done is not None:
                 return Gaussian.trusted(*done, belief.angle_indices)
         batch = mean.shape[:-1]
         if (
-            len(batch) == 1 and batch[0] > SLICE_RUNS and (parts := run_slices(batch, model.R))
-            and isinstance(z, np.ndarray) and z.shape == batch + model.R.shape[-1:]  # else refused whole
+            len(batch) == 1
+            and batch[0] > SLICE_RUNS
+            and (parts := run_slices(batch, model.R))
+            and isinstance(z, np.ndarray)
+            and z.shape == batch + model.R.shape[-1:]  # else refused whole
         ):
-            steps = [self.update(belief[part], z[part], model, *sliced_args(args, batch[0], part)) for part in parts]
+            steps = [
+                self.update(belief[part], z[part], model, *sliced_args(args, batch[0], part))
+                for part in parts
+            ]
             return joined(steps, belief.angle_indices)
         require_finite(z, "the measurement z", "UKF update")
         check_args(args, "UKF update")
@@ -224,7 +248,11 @@ class UnscentedKalmanFilter:
         z_pred, s_cov, dev = unscented_moments(images, weights, model.angle_indices)
         s_cov = s_cov + model.R
         mean, cov = kalman_correction(
-            mean, prior_cov, model.residual(z, z_pred, "UKF update"), cross_covariance(chol, dev, weights), s_cov,
+            mean,
+            prior_cov,
+            model.residual(z, z_pred, "UKF update"),
+            cross_covariance(chol, dev, weights),
+            s_cov,
             belief.angle_indices,
         )
         require_finite(mean, "the updated mean", "UKF update")

@@ -63,7 +63,9 @@ class Route:
     def __post_init__(self) -> None:
         waypoints = np.array(self.waypoints_m, dtype=np.float64)
         if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) == 0:
-            raise RobotsimError(f"route waypoints must have shape (p, 2), p >= 1, got {waypoints.shape}")
+            raise RobotsimError(
+                f"route waypoints must have shape (p, 2), p >= 1, got {waypoints.shape}"
+            )
         if not np.isfinite(waypoints).all():
             raise RobotsimError("route waypoints must be finite")
         if self.loop and len(waypoints) < 2:
@@ -100,7 +102,9 @@ class PurePursuit:
         if index == 0:
             return self._start
         count = len(self._waypoints)
-        return self._waypoints[(index - 1) % count if self.route.loop else min(index - 1, count - 1)]
+        return self._waypoints[
+            (index - 1) % count if self.route.loop else min(index - 1, count - 1)
+        ]
 
     def _is_last(self, segment: int) -> bool:
         return not self.route.loop and segment >= len(self._waypoints) - 1

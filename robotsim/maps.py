@@ -10,8 +10,8 @@ zero-length segment.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,8 +42,7 @@ def _as_segments(segments: Any, name: str) -> np.ndarray:
     if bad.any():
         index = int(np.flatnonzero(bad)[0])
         raise MapError(
-            f"map {name!r}: segment {index} has a non-finite coordinate "
-            f"{array[index].tolist()}"
+            f"map {name!r}: segment {index} has a non-finite coordinate {array[index].tolist()}"
         )
     length_m = np.hypot(*(array[:, 1] - array[:, 0]).T)
     short = length_m < MIN_SEGMENT_LENGTH_M
@@ -168,9 +167,7 @@ class SegmentMap:
         object.__setattr__(self, "boundary", _as_boundary(self.boundary, self.name))
 
     @classmethod
-    def from_segments(
-        cls, segments: Any, name: str = "map", boundary: Any = None
-    ) -> SegmentMap:
+    def from_segments(cls, segments: Any, name: str = "map", boundary: Any = None) -> SegmentMap:
         """A map from a nested list or array of segments ``[[[ax, ay], [bx, by]], ...]``."""
         return cls(segments=segments, name=name, boundary=boundary)
 
@@ -197,9 +194,7 @@ class SegmentMap:
         return cls._from_geometry(_parse(shapely.from_wkt, text, "WKT", name), name, boundary)
 
     @classmethod
-    def from_geojson(
-        cls, data: str | dict, name: str = "map", boundary: Any = None
-    ) -> SegmentMap:
+    def from_geojson(cls, data: str | dict, name: str = "map", boundary: Any = None) -> SegmentMap:
         """A map from GeoJSON text or a parsed dict (Geometry, Feature or FeatureCollection).
 
         Same rules as :meth:`from_wkt`; coordinates are read as metres.

@@ -25,7 +25,9 @@ def wrap_angle(angle_rad):
     ``(a + pi) % 2 pi`` can round up to exactly ``2 pi`` for ``a`` just below ``-pi``; that
     result (``+pi``) is moved to ``-pi`` so the half-open range holds at the edge too.
     """
-    wrapped = np.add(angle_rad, np.pi)  # a new array (or numpy float): the steps below work in place
+    wrapped = np.add(
+        angle_rad, np.pi
+    )  # a new array (or numpy float): the steps below work in place
     wrapped %= 2.0 * np.pi
     wrapped -= np.pi
     if wrapped.size and wrapped.max() >= np.pi:  # rare: one comparison pass in the common case
@@ -116,7 +118,10 @@ def integrate_pose(pose, velocity, dt_s: float) -> np.ndarray:
     chord = v * dt_s * np.sinc(turn / (2.0 * np.pi))
     heading = theta + 0.5 * turn
     return np.stack(
-        [pose[..., 0] + chord * np.cos(heading), pose[..., 1] + chord * np.sin(heading),
-         wrap_angle(theta + turn)],
+        [
+            pose[..., 0] + chord * np.cos(heading),
+            pose[..., 1] + chord * np.sin(heading),
+            wrap_angle(theta + turn),
+        ],
         axis=-1,
     )

@@ -138,7 +138,9 @@ def simulate(
     sim_world = World(segment_map, robot, start_pose, world)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
 
-    states, commands, contact = _run_physics(sim_world, plan.controller(robot), robot, count, schedule, progress)
+    states, commands, contact = _run_physics(
+        sim_world, plan.controller(robot), robot, count, schedule, progress
+    )
     t_s = np.arange(count) / rate_hz
     pose = np.column_stack([states[:, :2], wrap_angle(states[:, 2])])
     velocity = states[:, 3:5]
@@ -159,7 +161,11 @@ def simulate(
     scans = np.unique(np.round(np.arange(0.0, duration_s + 1e-9, 1.0 / belt.rate_hz) * rate_hz))
     scans = scans[scans < count].astype(np.int64)
     true_range = cone_distances(
-        pose[scans], segment_map.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+        pose[scans],
+        segment_map.segments,
+        belt.mount_xy,
+        belt.mount_angle_rad,
+        belt.half_aperture_rad,
     )
     readings, fault = simulate_readings(true_range, belt, sonar_rng)
 
@@ -187,7 +193,9 @@ def simulate(
     )
 
 
-def _kidnap_schedule(kidnaps, rate_hz: float, count: int, sim_world: World) -> dict[int, np.ndarray]:
+def _kidnap_schedule(
+    kidnaps, rate_hz: float, count: int, sim_world: World
+) -> dict[int, np.ndarray]:
     """Sample index -> pose of each kidnap (validated: inside the run, a free pose)."""
     schedule = {}
     for event in kidnaps:
@@ -204,7 +212,9 @@ def _kidnap_schedule(kidnaps, rate_hz: float, count: int, sim_world: World) -> d
 PROGRESS_REPORTS = 100
 
 
-def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, schedule, progress=None):
+def _run_physics(
+    sim_world: World, controller, robot: RobotParams, count: int, schedule, progress=None
+):
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
     the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
 
@@ -243,7 +253,11 @@ def _run_physics(sim_world: World, controller, robot: RobotParams, count: int, s
             break
         wanted_v, wanted_omega = commands[k] = command(k * dt_s, x, y, theta)
         target = limit_command(
-            wanted_v * vv + wanted_omega * vw, wanted_v * wv + wanted_omega * ww, target, dt_s, robot
+            wanted_v * vv + wanted_omega * vw,
+            wanted_v * wv + wanted_omega * ww,
+            target,
+            dt_s,
+            robot,
         )
         step(*target)
         if touched[0]:

@@ -56,14 +56,19 @@ class WorldParams:
     def __post_init__(self) -> None:
         checks = [
             (self.step_hz > 0 and math.isfinite(self.step_hz), "step_hz must be positive"),
-            (int(self.substeps) == self.substeps and self.substeps >= 1,
-             "substeps must be an integer >= 1"),
+            (
+                int(self.substeps) == self.substeps and self.substeps >= 1,
+                "substeps must be an integer >= 1",
+            ),
             (self.wall_radius_m >= 0, "wall_radius_m must be >= 0"),
             (self.collision_slop_m >= 0, "collision_slop_m must be >= 0"),
             (self.traction_coefficient > 0, "traction_coefficient must be positive"),
             (self.wall_friction >= 0, "wall_friction must be >= 0"),
-            (int(self.solver_iterations) == self.solver_iterations and self.solver_iterations >= 1,
-             "solver_iterations must be an integer >= 1"),
+            (
+                int(self.solver_iterations) == self.solver_iterations
+                and self.solver_iterations >= 1,
+                "solver_iterations must be an integer >= 1",
+            ),
         ]
         for ok, message in checks:
             if not ok:
@@ -170,4 +175,3 @@ class World:
         vx, vy = body.velocity
         theta = body.angle
         return x, y, theta, vx * math.cos(theta) + vy * math.sin(theta), body.angular_velocity
-

@@ -37,13 +37,21 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"a built-in scenario ({', '.join(builtin_names())}) or a TOML file (default: %(default)s)",
     )
     parser.add_argument(
-        "--rrd", type=Path, metavar="PATH", help="recording to write (default: runs/<scenario>-seed<N>.rrd)"
+        "--rrd",
+        type=Path,
+        metavar="PATH",
+        help="recording to write (default: runs/<scenario>-seed<N>.rrd)",
     )
     parser.add_argument(
-        "--summary", type=Path, metavar="PATH", help="summary JSON to write (default: runs/<scenario>-seed<N>.json)"
+        "--summary",
+        type=Path,
+        metavar="PATH",
+        help="summary JSON to write (default: runs/<scenario>-seed<N>.json)",
     )
     parser.add_argument("--seed", type=int, metavar="N", help="override the scenario's seed")
-    parser.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, seconds")
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="override the scenario's duration, seconds"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,14 +69,18 @@ def run(args: argparse.Namespace) -> int:
     bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
     start = time.perf_counter()
     try:
-        result = run_scenario(spec, progress=(lambda done: bar.update(RUN_SHARE * done)) if bar else None)
+        result = run_scenario(
+            spec, progress=(lambda done: bar.update(RUN_SHARE * done)) if bar else None
+        )
         with outputs.atomic_paths(rrd_path, summary_path) as (rrd_tmp, summary_tmp):
             recording_start = time.perf_counter()
             write_recording(rrd_tmp, spec, result.log, result.estimation)
             recording_s = time.perf_counter() - recording_start
             if bar:
                 bar.update(1.0)
-            summary = result.summary_with_timing(recording_s=recording_s, wall_s=time.perf_counter() - start)
+            summary = result.summary_with_timing(
+                recording_s=recording_s, wall_s=time.perf_counter() - start
+            )
             outputs.write_json(summary_tmp, summary)
     finally:
         if bar:
@@ -96,7 +108,12 @@ def guarantee_failure(spec: ScenarioSpec, summary: dict[str, Any]) -> str | None
     """
     sonar = spec.sensors.sonar
     containment = summary["containment"]
-    if sonar.outlier_prob > 0.0 or sonar.lost_echo_prob > 0.0 or containment is None or containment >= 1.0:
+    if (
+        sonar.outlier_prob > 0.0
+        or sonar.lost_echo_prob > 0.0
+        or containment is None
+        or containment >= 1.0
+    ):
         return None
     return (
         f"the guarantee failed: the truth left the interval set (containment {containment:.4g}) "
@@ -140,7 +157,9 @@ class ProgressBar:
             return
         self._shown = percent
         filled = percent * self.WIDTH // 100
-        self._stream.write(f"\r{self._label} [{'#' * filled}{'.' * (self.WIDTH - filled)}] {percent:3d}%")
+        self._stream.write(
+            f"\r{self._label} [{'#' * filled}{'.' * (self.WIDTH - filled)}] {percent:3d}%"
+        )
         self._stream.flush()
 
     def close(self) -> None:

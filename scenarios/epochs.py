@@ -19,7 +19,9 @@ from intervals.sonar import SonarBelt, SonarScan
 from intervals.tracker import STATUSES, EpochResult, IntervalTracker, TrackerSettings
 
 STATUS = STATUSES
-GLOBAL, TRACKING, INCONSISTENT, LOST = (STATUS.index(name) for name in ("global", "tracking", "inconsistent", "lost"))
+GLOBAL, TRACKING, INCONSISTENT, LOST = (
+    STATUS.index(name) for name in ("global", "tracking", "inconsistent", "lost")
+)
 
 #: Epoch states with a set, the ones the fusion clamps to.
 CLAMPED = (GLOBAL, TRACKING)
@@ -32,7 +34,9 @@ class EpochRunner:
     ``map_bounds (2, 2)``; ``belt``: the sonar belt seen by the interval tests.
     """
 
-    def __init__(self, tracker_settings: TrackerSettings, segments, boundary, map_bounds, belt: SonarBelt):
+    def __init__(
+        self, tracker_settings: TrackerSettings, segments, boundary, map_bounds, belt: SonarBelt
+    ):
         self._tracker = IntervalTracker(tracker_settings, map_bounds)
         self._segments, self._boundary, self._belt = segments, boundary, belt
         self._previous = None
@@ -78,7 +82,9 @@ class EpochLog:
         count = len(results)
         components = [r.components() for r in results]
         outer = [r.outer for r in results]
-        contains = np.array([bool(len(b)) and bool(contains_points(b, p[None]).any()) for b, p in zip(outer, truth)])
+        contains = np.array(
+            [bool(len(b)) and bool(contains_points(b, p[None]).any()) for b, p in zip(outer, truth)]
+        )
         return cls(
             t_s=np.asarray(t_s, dtype=np.float64),
             status=np.array([STATUS.index(r.status) for r in results], dtype=np.int8),
@@ -86,7 +92,9 @@ class EpochLog:
             box_counts=np.array([len(b) for b in outer], dtype=np.int64),
             boxes=np.concatenate(outer) if count else np.zeros((0, 3, 2)),
             inner=np.concatenate([r.inner_mask for r in results]) if count else np.zeros(0, bool),
-            labels=np.concatenate([labels for _, labels in components]) if count else np.zeros(0, np.int64),
+            labels=np.concatenate([labels for _, labels in components])
+            if count
+            else np.zeros(0, np.int64),
             hull=np.array([r.hull() for r in results]).reshape(count, 3, 2),
             components=np.array([n for n, _ in components], dtype=np.int64),
             area_m2=np.array([area_xy(b) if len(b) else np.nan for b in outer]),

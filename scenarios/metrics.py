@@ -14,7 +14,6 @@ import numpy as np
 from robotsim.maps import point_segment_distance
 from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
-
 from scenarios.epochs import STATUS
 
 if TYPE_CHECKING:
@@ -30,12 +29,14 @@ def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         "seed": spec.run.seed,
         "duration_s": spec.run.duration_s,
         "map": spec.map.name,
-        "samples": int(len(log.t_s)),
-        "scans": int(len(log.sonar_t_s)),
+        "samples": len(log.t_s),
+        "scans": len(log.sonar_t_s),
         "distance_m": path_length_m(log.pose),
         "final_pose": [float(v) for v in log.pose[-1]],
     }
-    summary["walls"] = wall_stats(log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m)
+    summary["walls"] = wall_stats(
+        log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m
+    )
     summary["walls"]["pymunk_contact_steps"] = int(np.count_nonzero(log.wall_contact))
     summary["sensors"] = {
         "encoders": encoder_stats(log.wheel_ticks),
@@ -63,7 +64,10 @@ def wall_stats(pose: np.ndarray, segments: np.ndarray, reach_m: float) -> dict[s
     """
     distance = point_segment_distance(pose[:, None, :2], segments[:, 0], segments[:, 1]).min(axis=1)
     gap = distance - reach_m
-    return {"min_gap_m": float(gap.min()), "contact_samples": int(np.count_nonzero(gap < CONTACT_GAP_M))}
+    return {
+        "min_gap_m": float(gap.min()),
+        "contact_samples": int(np.count_nonzero(gap < CONTACT_GAP_M)),
+    }
 
 
 def encoder_stats(wheel_ticks: np.ndarray) -> dict[str, Any]:
@@ -80,7 +84,9 @@ def gyro_stats(gyro_rad_s: np.ndarray, true_omega_rad_s: np.ndarray) -> dict[str
     return {"error_mean_rad_s": float(error.mean()), "error_std_rad_s": float(error.std())}
 
 
-def accelerometer_stats(accel_m_s2: np.ndarray, velocity: np.ndarray, rate_hz: float) -> dict[str, list[float]]:
+def accelerometer_stats(
+    accel_m_s2: np.ndarray, velocity: np.ndarray, rate_hz: float
+) -> dict[str, list[float]]:
     """Mean and standard deviation of the error ``(2,)`` of the body-frame specific force,
     against the specific force of the true motion (``robotsim.sensors.imu.specific_force``)."""
     error = accel_m_s2 - specific_force(velocity, rate_hz)
@@ -139,9 +145,11 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
     has_set = epochs.has_set
     with_set = int(has_set.sum())
     hull_w = epochs.hull[has_set, :2, 1] - epochs.hull[has_set, :2, 0]
-    counts = {name: int(np.count_nonzero(epochs.status == code)) for code, name in enumerate(STATUS)}
+    counts = {
+        name: int(np.count_nonzero(epochs.status == code)) for code, name in enumerate(STATUS)
+    }
     return {
-        "epochs": int(len(epochs.t_s)),
+        "epochs": len(epochs.t_s),
         "containment": float(epochs.contains_truth[has_set].mean()) if with_set else None,
         "box": {
             "mean_width_m": float(hull_w.max(axis=1).mean()) if with_set else None,

@@ -47,7 +47,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from robotsim.robot import wrap_angle
-
 from scenarios.runner import BRANCHES
 
 if TYPE_CHECKING:
@@ -123,11 +122,17 @@ def record_run(rec: rr.RecordingStream, spec: ScenarioSpec, log: SimulationLog) 
 
 def record_map(rec: rr.RecordingStream, segments: np.ndarray) -> None:
     """The map walls ``(m, 2, 2)``, static."""
-    rec.log("world/map/walls", rr.LineStrips2D(segments, colors=WALL_COLOR, radii=0.03), static=True)
+    rec.log(
+        "world/map/walls", rr.LineStrips2D(segments, colors=WALL_COLOR, radii=0.03), static=True
+    )
 
 
 def record_truth(
-    rec: rr.RecordingStream, t_s: np.ndarray, pose: np.ndarray, velocity: np.ndarray, radius_m: float
+    rec: rr.RecordingStream,
+    t_s: np.ndarray,
+    pose: np.ndarray,
+    velocity: np.ndarray,
+    radius_m: float,
 ) -> None:
     """The true path (static), footprint and heading ``pose (N, 3)``, and velocity ``(N, 2)``."""
     times = [rr.TimeColumn(TIMELINE, duration=t_s)]
@@ -140,12 +145,22 @@ def record_truth(
         columns=rr.Ellipses2D.columns(centers=xy, half_sizes=np.full((n, 2), radius_m)),
     )
     heading = radius_m * np.stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])], axis=1)
-    rec.send_columns("world/robot/heading", indexes=times, columns=rr.Arrows2D.columns(origins=xy, vectors=heading))
-    rec.send_columns("truth/v_m_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 0]))
-    rec.send_columns("truth/omega_rad_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 1]))
+    rec.send_columns(
+        "world/robot/heading",
+        indexes=times,
+        columns=rr.Arrows2D.columns(origins=xy, vectors=heading),
+    )
+    rec.send_columns(
+        "truth/v_m_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 0])
+    )
+    rec.send_columns(
+        "truth/omega_rad_s", indexes=times, columns=rr.Scalars.columns(scalars=velocity[:, 1])
+    )
 
 
-def sensor_positions(sonar_pose: np.ndarray, mount_xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def sensor_positions(
+    sonar_pose: np.ndarray, mount_xy_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """World positions ``x, y`` ``(M, k)`` of the sensors: ``s_i = (x, y) + R(theta) s~_i``."""
     x, y, theta = sonar_pose[:, 0, None], sonar_pose[:, 1, None], sonar_pose[:, 2, None]
     cos_t, sin_t = np.cos(theta), np.sin(theta)
@@ -208,9 +223,16 @@ def record_sonar(
         return
     times = [rr.TimeColumn(TIMELINE, duration=sonar_t_s)]
     outlines = cone_outlines(
-        sonar_pose, range_m, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad, belt.d_max_m
+        sonar_pose,
+        range_m,
+        belt.mount_xy,
+        belt.mount_angle_rad,
+        belt.half_aperture_rad,
+        belt.d_max_m,
     )
-    colors = np.where(np.isfinite(range_m)[..., None], CONE_ECHO_COLOR, CONE_NO_ECHO_COLOR).astype(np.uint8)
+    colors = np.where(np.isfinite(range_m)[..., None], CONE_ECHO_COLOR, CONE_NO_ECHO_COLOR).astype(
+        np.uint8
+    )
     rec.send_columns(
         "world/sonar/cones",
         indexes=times,
@@ -222,14 +244,18 @@ def record_sonar(
     rec.send_columns(
         "world/sonar/echoes",
         indexes=times,
-        columns=rr.Points2D.columns(positions=points, colors=np.tile(ECHO_COLOR, (len(points), 1))).partition(
-            counts
-        ),
+        columns=rr.Points2D.columns(
+            positions=points, colors=np.tile(ECHO_COLOR, (len(points), 1))
+        ).partition(counts),
     )
 
 
 def record_proprioceptive(
-    rec: rr.RecordingStream, t_s: np.ndarray, wheel_ticks: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray
+    rec: rr.RecordingStream,
+    t_s: np.ndarray,
+    wheel_ticks: np.ndarray,
+    gyro_rad_s: np.ndarray,
+    accel_m_s2: np.ndarray,
 ) -> None:
     """Encoder ticks ``(N, 2)``, gyro rate ``(N,)`` and specific force ``(N, 2)`` series."""
     times = [rr.TimeColumn(TIMELINE, duration=t_s)]
@@ -241,7 +267,11 @@ def record_proprioceptive(
         "sensors/accelerometer/y_m_s2": accel_m_s2[:, 1],
     }
     for entity, values in series.items():
-        rec.send_columns(entity, indexes=times, columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)))
+        rec.send_columns(
+            entity,
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)),
+        )
 
 
 def record_estimation(rec: rr.RecordingStream, log: SimulationLog, estimation: Estimation) -> None:
@@ -255,17 +285,35 @@ def record_estimation(rec: rr.RecordingStream, log: SimulationLog, estimation: E
         pose, cov = estimation.pose[b], estimation.pose_cov[b]
         color = BRANCH_COLORS[branch]
         base = f"world/estimates/{branch}"
-        rec.log(f"{base}/path", rr.LineStrips2D([np.ascontiguousarray(pose[:, :2])], colors=color, radii=0.01), static=True)
+        rec.log(
+            f"{base}/path",
+            rr.LineStrips2D([np.ascontiguousarray(pose[:, :2])], colors=color, radii=0.01),
+            static=True,
+        )
         shown = pose[every]
-        rec.send_columns(f"{base}/position", indexes=times, columns=rr.Points2D.columns(positions=shown[:, :2]))
+        rec.send_columns(
+            f"{base}/position", indexes=times, columns=rr.Points2D.columns(positions=shown[:, :2])
+        )
         rec.log(f"{base}/position", rr.Points2D.from_fields(colors=color, radii=0.05), static=True)
         outlines = covariance_ellipses(shown[:, :2], cov[every, :2, :2])
-        rec.send_columns(f"{base}/ellipse", indexes=times, columns=rr.LineStrips2D.columns(strips=outlines))
-        rec.log(f"{base}/ellipse", rr.LineStrips2D.from_fields(colors=color, radii=0.01), static=True)
+        rec.send_columns(
+            f"{base}/ellipse", indexes=times, columns=rr.LineStrips2D.columns(strips=outlines)
+        )
+        rec.log(
+            f"{base}/ellipse", rr.LineStrips2D.from_fields(colors=color, radii=0.01), static=True
+        )
         error_xy = np.linalg.norm(shown[:, :2] - truth[:, :2], axis=1)
         error_theta = np.abs(wrap_angle(shown[:, 2] - truth[:, 2]))
-        rec.send_columns(f"errors/position_m/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_xy))
-        rec.send_columns(f"errors/heading_rad/{branch}", indexes=times, columns=rr.Scalars.columns(scalars=error_theta))
+        rec.send_columns(
+            f"errors/position_m/{branch}",
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=error_xy),
+        )
+        rec.send_columns(
+            f"errors/heading_rad/{branch}",
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=error_theta),
+        )
 
 
 def covariance_ellipses(centres: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -291,7 +339,9 @@ def record_interval_sets(rec: rr.RecordingStream, epochs: EpochLog) -> None:
     rec.send_columns(
         "world/intervals/boxes",
         indexes=times,
-        columns=rr.Boxes2D.columns(centers=centres, half_sizes=half, colors=colors).partition(epochs.box_counts),
+        columns=rr.Boxes2D.columns(centers=centres, half_sizes=half, colors=colors).partition(
+            epochs.box_counts
+        ),
     )
     has_set = epochs.has_set
     hull = np.where(has_set[:, None, None], epochs.hull, 0.0)
@@ -303,7 +353,9 @@ def record_interval_sets(rec: rr.RecordingStream, epochs: EpochLog) -> None:
             half_sizes=0.5 * (hull[has_set, :2, 1] - hull[has_set, :2, 0]),
         ).partition(has_set.astype(np.int64)),
     )
-    rec.log("world/intervals/hull", rr.Boxes2D.from_fields(colors=HULL_COLOR, radii=0.01), static=True)
+    rec.log(
+        "world/intervals/hull", rr.Boxes2D.from_fields(colors=HULL_COLOR, radii=0.01), static=True
+    )
     width = np.max(epochs.hull[:, :2, 1] - epochs.hull[:, :2, 0], axis=1)
     series = {
         "intervals/box_width_m": width,

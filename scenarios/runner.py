@@ -119,7 +119,9 @@ class RunResult:
             "fusion_s": round(times.fusion_s, 4),
             "recording_s": round(recording_s, 4),
             "wall_s": round(wall_s, 4),
-            "ukf_step_us_median": _rounded(np.median(times.dr_step_us), 2) if times.dr_step_us.size else None,
+            "ukf_step_us_median": _rounded(np.median(times.dr_step_us), 2)
+            if times.dr_step_us.size
+            else None,
             "ia_epoch_ms_median": _rounded(np.median(epoch_ms), 3) if epoch_ms.size else None,
             "ia_epoch_ms_p95": _rounded(np.percentile(epoch_ms, 95), 3) if epoch_ms.size else None,
             "realtime_factor": round(self.duration_s / wall_s, 1) if wall_s > 0 else None,
@@ -142,16 +144,24 @@ def run_scenario(
     ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``).
     """
     start = time.perf_counter()
-    log = simulate_spec(spec, kidnaps=kidnaps, progress=(lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None)
+    log = simulate_spec(
+        spec,
+        kidnaps=kidnaps,
+        progress=(lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None,
+    )
     simulate_s = time.perf_counter() - start
     try:
         estimation, times = estimate(spec, log, progress=progress)
-    except IntervalError as exc:  # an impossible [estimation] setting met at run time (a box explosion)
+    except (
+        IntervalError
+    ) as exc:  # an impossible [estimation] setting met at run time (a box explosion)
         raise ScenarioError(spec.source, "estimation", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
-    return RunResult(log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s)
+    return RunResult(
+        log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s
+    )
 
 
 def simulate_spec(
@@ -169,7 +179,10 @@ def simulate_spec(
         rng=np.random.default_rng(spec.run.seed),
         robot=spec.robot,
         sensors=SensorSuite(
-            encoders=sensors.encoders, gyro=sensors.gyro, accelerometer=sensors.accelerometer, sonar=sensors.sonar
+            encoders=sensors.encoders,
+            gyro=sensors.gyro,
+            accelerometer=sensors.accelerometer,
+            sonar=sensors.sonar,
         ),
         world=WorldParams(step_hz=spec.run.rate_hz),
         kidnaps=kidnaps,
@@ -185,7 +198,12 @@ def dead_reckoning_noise(spec: ScenarioSpec) -> DeadReckoningNoise:
     positive variances).
     """
     s, robot = spec.sensors, spec.robot
-    ticks_at_v_max = robot.v_max_m_s / (2.0 * math.pi * robot.wheel_radius_m) * robot.ticks_per_rev / spec.run.rate_hz
+    ticks_at_v_max = (
+        robot.v_max_m_s
+        / (2.0 * math.pi * robot.wheel_radius_m)
+        * robot.ticks_per_rev
+        / spec.run.rate_hz
+    )
     floor = 1e-9
     return DeadReckoningNoise(
         tick_std=math.hypot(1.0 / math.sqrt(6.0), s.encoders.slip_std * ticks_at_v_max),
@@ -228,11 +246,19 @@ def estimate(
     robot = spec.robot
     nominal = NominalRobot(robot.wheel_radius_m, robot.wheel_base_m, robot.ticks_per_rev)
     noise = dead_reckoning_noise(spec)
-    data = odometry_data(log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal, noise)
-    dr = DeadReckoning(data, initial_belief(spec.start_pose, START_POSE_STD, noise), DeadReckoningSettings(est.filter))
+    data = odometry_data(
+        log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal, noise
+    )
+    dr = DeadReckoning(
+        data,
+        initial_belief(spec.start_pose, START_POSE_STD, noise),
+        DeadReckoningSettings(est.filter),
+    )
 
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    epochs = EpochRunner(tracker_settings(spec), spec.map.segments, spec.map.boundary, spec.map.bounds, belt)
+    epochs = EpochRunner(
+        tracker_settings(spec), spec.map.segments, spec.map.boundary, spec.map.bounds, belt
+    )
     stride = est.scan_stride(spec.sensors.sonar.rate_hz)
     scans = np.arange(0, len(log.sonar_t_s), stride)
     epoch_index = np.searchsorted(log.t_s, log.sonar_t_s[scans] - 0.5 / log.rate_hz)
@@ -303,14 +329,18 @@ def estimation_summary(log: SimulationLog, estimation: Estimation) -> dict[str, 
     interval figures, and how the fusion went (deterministic)."""
     truth = log.pose
     rmse_pos = {name: rmse_position_m(estimation.pose[b], truth) for b, name in enumerate(BRANCHES)}
-    rmse_head = {name: rmse_heading_rad(estimation.pose[b], truth) for b, name in enumerate(BRANCHES)}
+    rmse_head = {
+        name: rmse_heading_rad(estimation.pose[b], truth) for b, name in enumerate(BRANCHES)
+    }
     clamped = estimation.component >= 0
     moved = np.any(estimation.after[:, :2] != estimation.before[:, :2], axis=1)
     in_box = _in_box(estimation.after[clamped, :2], estimation.fused_box[clamped, :2])
     summary = {
         "rmse_position_m": rmse_pos,
         "rmse_heading_rad": rmse_head,
-        "fused_to_ukf_only_position_rmse": rmse_pos["fused"] / rmse_pos["ukf_only"] if rmse_pos["ukf_only"] > 0 else None,
+        "fused_to_ukf_only_position_rmse": rmse_pos["fused"] / rmse_pos["ukf_only"]
+        if rmse_pos["ukf_only"] > 0
+        else None,
         **interval_stats(estimation.epochs),
         "fusion": {
             "clamped_epochs": int(clamped.sum()),

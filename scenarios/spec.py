@@ -193,7 +193,9 @@ class ScenarioSpec:
             run = dataclasses.replace(run, seed=seed)
         if duration_s is not None:
             if not (math.isfinite(duration_s) and duration_s > 0):
-                raise ScenarioError(None, "--duration", f"must be a finite number > 0, got {duration_s}")
+                raise ScenarioError(
+                    None, "--duration", f"must be a finite number > 0, got {duration_s}"
+                )
             reason = _sample_count_problem(duration_s, run.rate_hz)
             if reason is not None:
                 raise ScenarioError(None, "--duration", reason)
@@ -225,7 +227,9 @@ def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
     return _load_file(path, name=path.stem, source=str(path))
 
 
-def parse_scenario(text: str, *, source: str = "<string>", base_dir: Path | None = None, name: str = "scenario") -> ScenarioSpec:
+def parse_scenario(
+    text: str, *, source: str = "<string>", base_dir: Path | None = None, name: str = "scenario"
+) -> ScenarioSpec:
     """Validate scenario TOML ``text``; map files are resolved against ``base_dir``."""
     try:
         data = tomllib.loads(text)
@@ -251,7 +255,11 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     start_xy = robot_table.take_array("start_xy_m", (2,))
     heading_deg = robot_table.take_float("start_heading_deg", 0.0)
     robot = _read_params(robot_table, RobotParams())
-    start_pose = (float(start_xy[0]), float(start_xy[1]), float(wrap_angle(math.radians(heading_deg))))
+    start_pose = (
+        float(start_xy[0]),
+        float(start_xy[1]),
+        float(wrap_angle(math.radians(heading_deg))),
+    )
     _check_start(robot_table, segment_map, start_pose, robot)
     plan = _read_route(top.take_table("route"), segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
@@ -290,7 +298,9 @@ def _read_run(table: Table) -> RunSpec:
     reason = _sample_count_problem(duration_s, rate_hz)
     if reason is not None:
         # blame the rate when the duration alone would be fine at the default rate
-        too_fast = duration_s * rate_hz > MAX_SAMPLES and duration_s * DEFAULT_RATE_HZ <= MAX_SAMPLES
+        too_fast = (
+            duration_s * rate_hz > MAX_SAMPLES and duration_s * DEFAULT_RATE_HZ <= MAX_SAMPLES
+        )
         raise table.error(rate_key if too_fast else "duration_s", reason)
     return RunSpec(duration_s=duration_s, seed=seed, rate_hz=rate_hz)
 
@@ -311,7 +321,9 @@ def _sample_count_problem(duration_s: float, rate_hz: float) -> str | None:
 def _read_map(table: Table, base_dir: Path) -> SegmentMap:
     given = [k for k in ("builtin", "segments", "file") if table.has(k)]
     if len(given) > 1:
-        raise table.error(given[1], f"give one of builtin, segments or file, not {' and '.join(given)}")
+        raise table.error(
+            given[1], f"give one of builtin, segments or file, not {' and '.join(given)}"
+        )
     kind = given[0] if given else "builtin"
     if kind == "builtin":
         name = table.take_str("builtin", DEFAULT_MAP, choices=tuple(BUILTIN_MAP_NAMES))
@@ -319,11 +331,15 @@ def _read_map(table: Table, base_dir: Path) -> SegmentMap:
         return _map_or_error(table, "builtin", lambda: builtin_map(name))
     if kind == "segments":
         if table.peek("segments") == []:
-            raise table.error("segments", "the map is empty: give at least one segment [[ax, ay], [bx, by]]")
+            raise table.error(
+                "segments", "the map is empty: give at least one segment [[ax, ay], [bx, by]]"
+            )
         raw = table.take_array("segments", (None, 2, 2))
         table.finish()
         return _map_or_error(
-            table, "segments", lambda: SegmentMap.from_segments(raw, name="inline", boundary=outer_wall(raw))
+            table,
+            "segments",
+            lambda: SegmentMap.from_segments(raw, name="inline", boundary=outer_wall(raw)),
         )
     relative = table.take_str("file")
     table.finish()
@@ -349,7 +365,9 @@ def _map_or_error(table: Table, key: str, make: Callable[[], SegmentMap]) -> Seg
         raise table.error(key, str(exc)) from None
 
 
-def _check_start(table: Table, segment_map: SegmentMap, pose: tuple[float, float, float], robot: RobotParams) -> None:
+def _check_start(
+    table: Table, segment_map: SegmentMap, pose: tuple[float, float, float], robot: RobotParams
+) -> None:
     """The start footprint must lie inside the outer wall and clear of every wall.
 
     The simulator's own check decides: a world is built at the start pose (cheap: the walls
@@ -374,12 +392,18 @@ def _read_route(table: Table, segment_map: SegmentMap, robot: RobotParams) -> Pl
         return STAND_STILL
     waypoints = table.take_array("waypoints_m", (None, 2))
     if segment_map.boundary is not None:
-        inside = shapely.contains_xy(shapely.Polygon(segment_map.boundary), waypoints[:, 0], waypoints[:, 1])
+        inside = shapely.contains_xy(
+            shapely.Polygon(segment_map.boundary), waypoints[:, 0], waypoints[:, 1]
+        )
         if not np.all(inside):
-            raise table.error(f"waypoints_m[{int(np.argmin(inside))}]", "lies outside the map's outer wall")
+            raise table.error(
+                f"waypoints_m[{int(np.argmin(inside))}]", "lies outside the map's outer wall"
+            )
     route = _read_params(table, Route(waypoints_m=waypoints), skip=("waypoints_m",))
     if route.cruise_speed_m_s > robot.v_max_m_s:
-        raise table.error("cruise_speed_m_s", f"exceeds the robot's v_max_m_s = {robot.v_max_m_s:g}")
+        raise table.error(
+            "cruise_speed_m_s", f"exceeds the robot's v_max_m_s = {robot.v_max_m_s:g}"
+        )
     return route
 
 
@@ -388,13 +412,19 @@ def _profile(steps: list[Table], robot: RobotParams) -> ScriptedProfile:
     durations, speeds, rates = [], [], []
     for step in steps:
         durations.append(step.take_float("duration_s", above=0.0))
-        speeds.append(step.take_float("v_m_s", 0.0, minimum=-robot.v_max_m_s, maximum=robot.v_max_m_s))
+        speeds.append(
+            step.take_float("v_m_s", 0.0, minimum=-robot.v_max_m_s, maximum=robot.v_max_m_s)
+        )
         rates.append(_take_angle(step, "omega_rad_s", 0.0))
         if abs(rates[-1]) > robot.omega_max_rad_s:
-            raise step.error("omega_rad_s", f"exceeds the robot's omega_max_rad_s = {robot.omega_max_rad_s:g}")
+            raise step.error(
+                "omega_rad_s", f"exceeds the robot's omega_max_rad_s = {robot.omega_max_rad_s:g}"
+            )
         step.finish()
     starts = np.concatenate([[0.0], np.cumsum(durations)])
-    return ScriptedProfile(t_s=starts, v_m_s=np.append(speeds, 0.0), omega_rad_s=np.append(rates, 0.0))
+    return ScriptedProfile(
+        t_s=starts, v_m_s=np.append(speeds, 0.0), omega_rad_s=np.append(rates, 0.0)
+    )
 
 
 def _read_sensors(table: Table, robot: RobotParams, run: RunSpec) -> SensorsSpec:
@@ -414,8 +444,12 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
     The simulator takes a scan at a sample, so the sonar's rate must divide the run's a
     whole number of times (a faster or off-beat sonar would be silently slowed or jittered).
     """
-    if table.has("count") and (table.has("mount_xy") or table.has("mount_angle_rad") or table.has("mount_angle_deg")):
-        raise table.error("count", "give count (an even belt) or mount_xy and mount_angle_rad, not both")
+    if table.has("count") and (
+        table.has("mount_xy") or table.has("mount_angle_rad") or table.has("mount_angle_deg")
+    ):
+        raise table.error(
+            "count", "give count (an even belt) or mount_xy and mount_angle_rad, not both"
+        )
     count = table.take_int("count", None, minimum=1)
     belt = {} if count is None else {"count": count}
     try:
@@ -425,7 +459,10 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
     sonar = _read_params(table, default)
     ratio = run.rate_hz / sonar.rate_hz
     if ratio < 1.0 - RATE_RATIO_TOL:
-        raise table.error("rate_hz", f"faster than the simulation (run.rate_hz = {run.rate_hz:g} Hz), got {sonar.rate_hz:g}")
+        raise table.error(
+            "rate_hz",
+            f"faster than the simulation (run.rate_hz = {run.rate_hz:g} Hz), got {sonar.rate_hz:g}",
+        )
     if abs(ratio - round(ratio)) > RATE_RATIO_TOL:
         raise table.error(
             "rate_hz",
@@ -446,7 +483,9 @@ def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
         "q_max": table.take_int("q_max", default.q_max, minimum=0),
         "guaranteed": table.take_bool("guaranteed", default.guaranteed),
         "interval_rate_hz": table.take_float("interval_rate_hz", sonar.rate_hz, above=0.0),
-        "heading_scale_m_per_rad": table.take_float("heading_scale_m_per_rad", default.heading_scale_m_per_rad, above=0.0),
+        "heading_scale_m_per_rad": table.take_float(
+            "heading_scale_m_per_rad", default.heading_scale_m_per_rad, above=0.0
+        ),
         "imagesp_pitch_m": table.take_float("imagesp_pitch_m", default.imagesp_pitch_m, above=0.0),
         "free_space": table.take_bool("free_space", sonar.lost_echo_prob == 0.0),
         "ray_test": table.take_bool("ray_test", default.ray_test),
@@ -471,7 +510,10 @@ def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
             f"must divide the sonar rate ({sonar.rate_hz:g} Hz) a whole number of times, got {values['interval_rate_hz']:g}",
         )
     if values["imagesp_pitch_m"] < values["eps_m"]:
-        raise table.error("imagesp_pitch_m", f"must be >= eps_m ({values['eps_m']:g}), got {values['imagesp_pitch_m']:g}")
+        raise table.error(
+            "imagesp_pitch_m",
+            f"must be >= eps_m ({values['eps_m']:g}), got {values['imagesp_pitch_m']:g}",
+        )
     return EstimationSpec(**values)
 
 
@@ -491,7 +533,14 @@ def _deg_alias(field_name: str) -> str:
     return _RADIAN_TOKEN.sub("_deg", field_name, count=1)
 
 
-def _take_angle(table: Table, name: str, default: Any, *, shape: tuple[int | None, ...] | None = None, **bounds: float) -> Any:
+def _take_angle(
+    table: Table,
+    name: str,
+    default: Any,
+    *,
+    shape: tuple[int | None, ...] | None = None,
+    **bounds: float,
+) -> Any:
     """A ``*_rad*`` key (a number, or an array of ``shape``) that may instead be given in
     degrees under its ``*_deg*`` spelling, never both; returned in radians.
 
@@ -512,8 +561,14 @@ def _take_angle(table: Table, name: str, default: Any, *, shape: tuple[int | Non
 #: Bounds implied by a parameter's name (MODELS.md section 1 naming rules).
 _NAME_BOUNDS: tuple[tuple[Callable[[str], bool], dict[str, float]], ...] = (
     (lambda n: n.endswith("_prob"), {"minimum": 0.0, "maximum": 1.0}),
-    (lambda n: any(word in n for word in ("_std", "density", "random_walk", "_bound")), {"minimum": 0.0}),
-    (lambda n: n.endswith("rate_hz") or n.startswith(("d_max", "v_max", "omega_max", "a_max")), {"above": 0.0}),
+    (
+        lambda n: any(word in n for word in ("_std", "density", "random_walk", "_bound")),
+        {"minimum": 0.0},
+    ),
+    (
+        lambda n: n.endswith("rate_hz") or n.startswith(("d_max", "v_max", "omega_max", "a_max")),
+        {"above": 0.0},
+    ),
     (lambda n: "radius" in n or n.startswith(("wheel_base", "mass")), {"above": 0.0}),
 )
 
@@ -547,7 +602,11 @@ def _read_params(table: Table, defaults: Any, skip: tuple[str, ...] = ()) -> Any
             value = table.take_float(name, None, **_bounds_for(name))
         elif isinstance(current, np.ndarray):
             shape = (None, *current.shape[1:])
-            value = _take_angle(table, name, None, shape=shape) if _is_radian(name) else table.take_array(name, shape, None)
+            value = (
+                _take_angle(table, name, None, shape=shape)
+                if _is_radian(name)
+                else table.take_array(name, shape, None)
+            )
         else:
             continue
         if value is not None:

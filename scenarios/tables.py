@@ -148,7 +148,9 @@ class Table:
         """Refuse any key that no ``take_*`` call asked for (a typo must not pass silently)."""
         for name in self._data:
             hint = difflib.get_close_matches(name, self._known, n=1)
-            known = f"did you mean {hint[0]!r}?" if hint else f"known keys: {', '.join(self._known)}"
+            known = (
+                f"did you mean {hint[0]!r}?" if hint else f"known keys: {', '.join(self._known)}"
+            )
             raise self.error(name, f"unknown key ({known})" if self._known else "unknown key")
 
 

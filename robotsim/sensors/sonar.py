@@ -106,7 +106,11 @@ def cone_distances(
         raise RobotsimError(f"poses must have shape (..., 3), got {poses.shape}")
     if segments.ndim != 3 or segments.shape[1:] != (2, 2):
         raise RobotsimError(f"segments must have shape (m, 2, 2), got {segments.shape}")
-    if mount_xy.ndim != 2 or mount_xy.shape[1] != 2 or mount_angle_rad.shape != mount_xy[:, 0].shape:
+    if (
+        mount_xy.ndim != 2
+        or mount_xy.shape[1] != 2
+        or mount_angle_rad.shape != mount_xy[:, 0].shape
+    ):
         raise RobotsimError(
             f"mount_xy must be (k, 2) and mount_angle_rad (k,), got {mount_xy.shape} and "
             f"{mount_angle_rad.shape}"
@@ -131,9 +135,7 @@ def cone_distances(
     block = max(1, _BLOCK_ELEMENTS // max(1, k * m))
     for start in range(0, len(flat), block):
         rows = slice(start, start + block)
-        out[rows] = _cone_distances_block(
-            s_x[rows], s_y[rows], phi[rows], a, e, half_aperture_rad
-        )
+        out[rows] = _cone_distances_block(s_x[rows], s_y[rows], phi[rows], a, e, half_aperture_rad)
     return out.reshape(*batch_shape, k)
 
 
@@ -176,7 +178,9 @@ class SonarBeltParams:
         mount_xy = _read_only(self.mount_xy, "mount_xy")
         mount_angle = _read_only(self.mount_angle_rad, "mount_angle_rad")
         if mount_xy.ndim != 2 or mount_xy.shape[1] != 2 or len(mount_xy) == 0:
-            raise RobotsimError(f"sonar mount_xy must have shape (k, 2), k >= 1, got {mount_xy.shape}")
+            raise RobotsimError(
+                f"sonar mount_xy must have shape (k, 2), k >= 1, got {mount_xy.shape}"
+            )
         if mount_angle.shape != (len(mount_xy),):
             raise RobotsimError(
                 f"sonar mount_angle_rad must have shape ({len(mount_xy)},), got {mount_angle.shape}"
@@ -220,7 +224,10 @@ class SonarBeltParams:
         angle = np.where(angle >= np.pi, angle - 2.0 * np.pi, angle)  # wrap to [-pi, pi)
         mount_xy = robot_radius_m * np.stack([np.cos(angle), np.sin(angle)], axis=1)
         return cls(
-            mount_xy=mount_xy, mount_angle_rad=angle, half_aperture_rad=half_aperture_rad, **settings
+            mount_xy=mount_xy,
+            mount_angle_rad=angle,
+            half_aperture_rad=half_aperture_rad,
+            **settings,
         )
 
 

@@ -112,14 +112,20 @@ class _Profile:
         n = max(2, round(duration_s / self.dt))
         t = (np.arange(n) + 0.5) * self.dt
         period = n * self.dt
-        curvature = offset_m * math.pi**2 * np.cos(math.pi * t / period) / (2.0 * period**2 * self.speed**2)
+        curvature = (
+            offset_m * math.pi**2 * np.cos(math.pi * t / period) / (2.0 * period**2 * self.speed**2)
+        )
         self._append(np.zeros(n), curvature)
 
-    def build(self, name: str, duration_s: float, initial_speed_m_s: float, rate_hz: float) -> ReferenceDrive:
+    def build(
+        self, name: str, duration_s: float, initial_speed_m_s: float, rate_hz: float
+    ) -> ReferenceDrive:
         n = round(duration_s * rate_hz) + 1
         accel = np.concatenate(self.accel)[:n]
         steer = np.arctan(np.concatenate(self.curvature)[:n] * self.params.wheelbase_m)
-        return integrate_single_track(name, accel, steer, (0.0, 0.0, 0.0), initial_speed_m_s, rate_hz, self.params)
+        return integrate_single_track(
+            name, accel, steer, (0.0, 0.0, 0.0), initial_speed_m_s, rate_hz, self.params
+        )
 
 
 def _check(duration_s: float, rate_hz: float) -> None:
@@ -130,7 +136,10 @@ def _check(duration_s: float, rate_hz: float) -> None:
 
 
 def urban_drive(
-    rng: np.random.Generator, duration_s: float = 300.0, rate_hz: float = 100.0, params: VehicleParams | None = None
+    rng: np.random.Generator,
+    duration_s: float = 300.0,
+    rate_hz: float = 100.0,
+    params: VehicleParams | None = None,
 ) -> ReferenceDrive:
     """City traffic from standstill: 8-14 m/s between intersections, stops at lights
     (2-10 s), right-angle turns at 4.5-7 m/s, bends; accelerations up to 0.9 of the limits.
@@ -160,7 +169,10 @@ def urban_drive(
 
 
 def highway_drive(
-    rng: np.random.Generator, duration_s: float = 300.0, rate_hz: float = 100.0, params: VehicleParams | None = None
+    rng: np.random.Generator,
+    duration_s: float = 300.0,
+    rate_hz: float = 100.0,
+    params: VehicleParams | None = None,
 ) -> ReferenceDrive:
     """Motorway at 22-34 m/s: long straights, bends of 300-1000 m radius, speed changes of
     0.6-1.5 m/s^2 and lane changes of one lane width in 4-7 s.
@@ -178,7 +190,9 @@ def highway_drive(
             elif kind == 1:
                 p.lane_change(side * LANE_WIDTH_M, rng.uniform(4.0, 7.0))
             else:
-                p.speed_change(rng.uniform(22.0, min(34.0, params.v_max_m_s)), rng.uniform(0.6, 1.5))
+                p.speed_change(
+                    rng.uniform(22.0, min(34.0, params.v_max_m_s)), rng.uniform(0.6, 1.5)
+                )
     return p.build("highway", duration_s, initial_speed, rate_hz)
 
 

@@ -51,11 +51,15 @@ class VehicleSensorParams:
         for name in ("gps_rate_hz", "odometry_rate_hz"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
-                raise RobotsimError(f"VehicleSensorParams: {name} must be finite and > 0, got {value!r}")
+                raise RobotsimError(
+                    f"VehicleSensorParams: {name} must be finite and > 0, got {value!r}"
+                )
         for name in ("gps_noise_std_m", "speed_noise_std_m_s", "yaw_rate_noise_std_rad_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
-                raise RobotsimError(f"VehicleSensorParams: {name} must be finite and >= 0, got {value!r}")
+                raise RobotsimError(
+                    f"VehicleSensorParams: {name} must be finite and >= 0, got {value!r}"
+                )
         for name in ("speed_scale_error", "yaw_rate_bias_rad_s"):
             if not math.isfinite(getattr(self, name)):
                 raise RobotsimError(f"VehicleSensorParams: {name} must be finite")
@@ -119,9 +123,13 @@ def measure(
     speed_noise = params.speed_noise_std_m_s * rng.standard_normal((runs, k))
     speed = (1.0 + params.speed_scale_error) * true_speed + speed_noise
     yaw_rate = (
-        true_yaw_rate + params.yaw_rate_bias_rad_s + params.yaw_rate_noise_std_rad_s * rng.standard_normal((runs, k))
+        true_yaw_rate
+        + params.yaw_rate_bias_rad_s
+        + params.yaw_rate_noise_std_rad_s * rng.standard_normal((runs, k))
     )
-    gps = drive.pose[index[gps_epoch], :2] + params.gps_noise_std_m * rng.standard_normal((runs, g, 2))
+    gps = drive.pose[index[gps_epoch], :2] + params.gps_noise_std_m * rng.standard_normal(
+        (runs, g, 2)
+    )
     return VehicleMeasurements(
         t_s=drive.t_s[index],
         drive_index=index,

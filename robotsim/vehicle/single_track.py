@@ -43,15 +43,25 @@ class VehicleParams:
     lateral_accel_max_m_s2: float = 4.0
 
     def __post_init__(self) -> None:
-        positive = ("wheelbase_m", "max_steer_rad", "v_max_m_s", "a_max_m_s2", "lateral_accel_max_m_s2")
+        positive = (
+            "wheelbase_m",
+            "max_steer_rad",
+            "v_max_m_s",
+            "a_max_m_s2",
+            "lateral_accel_max_m_s2",
+        )
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise RobotsimError(f"VehicleParams: {name} must be finite and > 0, got {value!r}")
         if not (math.isfinite(self.a_min_m_s2) and self.a_min_m_s2 < 0.0):
-            raise RobotsimError(f"VehicleParams: a_min_m_s2 must be finite and < 0, got {self.a_min_m_s2!r}")
+            raise RobotsimError(
+                f"VehicleParams: a_min_m_s2 must be finite and < 0, got {self.a_min_m_s2!r}"
+            )
         if self.max_steer_rad >= math.pi / 2:
-            raise RobotsimError(f"VehicleParams: max_steer_rad must be < pi/2, got {self.max_steer_rad!r}")
+            raise RobotsimError(
+                f"VehicleParams: max_steer_rad must be < pi/2, got {self.max_steer_rad!r}"
+            )
 
     @property
     def max_curvature_1_m(self) -> float:
@@ -124,7 +134,9 @@ def integrate_single_track(
     dt = 1.0 / rate_hz
     speed = initial_speed_m_s + np.concatenate([[0.0], np.cumsum(accel[:-1]) * dt])
     if speed.min() < -1e-9:
-        raise RobotsimError(f"single-track model: the inputs make the car reverse (speed {speed.min():.3g} m/s)")
+        raise RobotsimError(
+            f"single-track model: the inputs make the car reverse (speed {speed.min():.3g} m/s)"
+        )
     speed = np.where(speed < 1e-9, 0.0, speed)
     yaw_rate = speed * np.tan(steer) / params.wheelbase_m
     heading = initial_pose[2] + _cumulative_trapezoid(yaw_rate, dt)

@@ -14,16 +14,24 @@ from localization.models import MeasurementModel, ProcessModel
 from localization.mukf import ModifiedBelief
 from scenarios.errors import ScenarioError
 
-
 #: Line styles of the four filters of a figure: filters that coincide stay visible.
 LINE_STYLES = ("-", "--", "-.", ":")
 
 
 def add_common_arguments(parser: argparse.ArgumentParser, name: str, steps: int) -> None:
     """``--runs``, ``--steps``, ``--out`` and ``--seed`` with the paper's defaults."""
-    parser.add_argument("--runs", type=int, default=100, help="Monte Carlo runs (default: 100, as the paper)")
-    parser.add_argument("--steps", type=int, default=steps, help=f"time steps per run (default: {steps}, as the paper)")
-    parser.add_argument("--out", default=f"runs/reproduce/{name}", help="output folder (replaced atomically)")
+    parser.add_argument(
+        "--runs", type=int, default=100, help="Monte Carlo runs (default: 100, as the paper)"
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=steps,
+        help=f"time steps per run (default: {steps}, as the paper)",
+    )
+    parser.add_argument(
+        "--out", default=f"runs/reproduce/{name}", help="output folder (replaced atomically)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise draws (default: 0)")
 
 
@@ -63,7 +71,9 @@ def check_counts(args: argparse.Namespace, reason_source: str) -> None:
     """Refuse non-positive ``--runs`` / ``--steps`` and a negative ``--seed`` with a one-line user error."""
     for key in ("runs", "steps"):
         if getattr(args, key) < 1:
-            raise ScenarioError(reason_source, f"--{key}", f"must be >= 1, got {getattr(args, key)}")
+            raise ScenarioError(
+                reason_source, f"--{key}", f"must be >= 1, got {getattr(args, key)}"
+            )
     if args.seed < 0:
         raise ScenarioError(reason_source, "--seed", f"must be >= 0, got {args.seed}")
 
@@ -98,13 +108,24 @@ def best_of(values: dict[str, float], name: str) -> list[tuple[float, float]]:
 
 def verdict_lines(near: Mapping[str, float], claims: Mapping[str, str], what: str) -> list[str]:
     """``table.md`` lines: how close filter pairs are, then the verdict on each of the paper's claims."""
-    lines = [f"Largest relative {what} difference, {pair}: {value:.2e}" for pair, value in near.items()]
-    return lines + ["", "Paper's orderings:", ""] + [f"- {verdict}: {claim}" for claim, verdict in claims.items()] + [""]
+    lines = [
+        f"Largest relative {what} difference, {pair}: {value:.2e}" for pair, value in near.items()
+    ]
+    return (
+        lines
+        + ["", "Paper's orderings:", ""]
+        + [f"- {verdict}: {claim}" for claim, verdict in claims.items()]
+        + [""]
+    )
 
 
 def choices_lines(choices: Mapping[str, str]) -> list[str]:
     """The ``table.md`` section listing the choices where the paper is silent."""
-    return ["## Choices where the paper is silent", ""] + [f"- {key}: {value}" for key, value in choices.items()] + [""]
+    return (
+        ["## Choices where the paper is silent", ""]
+        + [f"- {key}: {value}" for key, value in choices.items()]
+        + [""]
+    )
 
 
 def save_figure(

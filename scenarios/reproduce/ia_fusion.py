@@ -37,7 +37,14 @@ from typing import Any
 import numpy as np
 
 from scenarios.outputs import atomic_directory, write_json, write_text
-from scenarios.runner import FUSED, UKF_ONLY, Estimation, estimate, estimation_summary, simulate_spec
+from scenarios.runner import (
+    FUSED,
+    UKF_ONLY,
+    Estimation,
+    estimate,
+    estimation_summary,
+    simulate_spec,
+)
 from scenarios.spec import load_scenario
 
 HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP trackers on hall (table, figures 7-9)"
@@ -51,8 +58,18 @@ BOX_EVERY = 5
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``robotsim reproduce ia-fusion``."""
-    parser.add_argument("--out", type=Path, default=Path("runs/reproduce/ia-fusion"), help="output folder (default: %(default)s)")
-    parser.add_argument("--duration", type=float, metavar="S", help="simulated time, s (default: the scenario's, 600)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/reproduce/ia-fusion"),
+        help="output folder (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="simulated time, s (default: the scenario's, 600)",
+    )
     parser.add_argument("--seed", type=int, metavar="N", help="seed (default: the scenario's, 0)")
 
 
@@ -68,7 +85,9 @@ def main(args: argparse.Namespace) -> int:
     rows: dict[str, dict[str, Any]] = {}
     runs: dict[str, Estimation] = {}
     for tracker in TRACKERS:
-        variant = dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, tracker=tracker))
+        variant = dataclasses.replace(
+            spec, estimation=dataclasses.replace(spec.estimation, tracker=tracker)
+        )
         estimation, _ = estimate(variant, log)
         runs[tracker] = estimation
         rows[tracker] = table_row(estimation_summary(log, estimation), estimation)
@@ -77,7 +96,9 @@ def main(args: argparse.Namespace) -> int:
         "scenario": spec.name,
         "seed": spec.run.seed,
         "duration_s": spec.run.duration_s,
-        "estimation": {k: v for k, v in dataclasses.asdict(spec.estimation).items() if k != "tracker"},
+        "estimation": {
+            k: v for k, v in dataclasses.asdict(spec.estimation).items() if k != "tracker"
+        },
         "trackers": rows,
         "claims": claims,
     }
@@ -85,11 +106,20 @@ def main(args: argparse.Namespace) -> int:
         write_json(folder / "table.json", table)
         write_text(folder / "table.md", markdown(table))
         figures(plt, folder, spec, log, runs)
-    verdict = "all hold" if all(claims.values()) else "NOT all hold: " + ", ".join(k for k, v in claims.items() if not v)
-    print(f"ia-fusion: {spec.run.duration_s:g} s of {spec.name}, seed {spec.run.seed}; paper's claims {verdict}; wrote {args.out}")
+    verdict = (
+        "all hold"
+        if all(claims.values())
+        else "NOT all hold: " + ", ".join(k for k, v in claims.items() if not v)
+    )
+    print(
+        f"ia-fusion: {spec.run.duration_s:g} s of {spec.name}, seed {spec.run.seed}; paper's claims {verdict}; wrote {args.out}"
+    )
     missed = missed_guarantee(rows)
     if missed:
-        print(f"ia-fusion: the guarantee failed: the truth left the interval set ({missed})", file=sys.stderr)
+        print(
+            f"ia-fusion: the guarantee failed: the truth left the interval set ({missed})",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -127,12 +157,15 @@ def check_claims(rows: dict[str, dict[str, Any]]) -> dict[str, bool]:
     """Paper 002's qualitative results, and the guarantee, on this run."""
     sivia, imagesp = rows["sivia"], rows["imagesp"]
     return {
-        "containment is 1 for both trackers": sivia["containment"] == 1.0 and imagesp["containment"] == 1.0,
+        "containment is 1 for both trackers": sivia["containment"] == 1.0
+        and imagesp["containment"] == 1.0,
         "fused position RMSE below UKF-only (both trackers)": all(
             r["rmse_position_m"]["fused"] < r["rmse_position_m"]["ukf_only"] for r in rows.values()
         ),
-        "IMAGESP boxes smaller than SIVIA's (mean area)": imagesp["box"]["mean_area_m2"] < sivia["box"]["mean_area_m2"],
-        "IMAGESP slower than SIVIA (median time per epoch)": imagesp["epoch_ms_median"] > sivia["epoch_ms_median"],
+        "IMAGESP boxes smaller than SIVIA's (mean area)": imagesp["box"]["mean_area_m2"]
+        < sivia["box"]["mean_area_m2"],
+        "IMAGESP slower than SIVIA (median time per epoch)": imagesp["epoch_ms_median"]
+        > sivia["epoch_ms_median"],
     }
 
 
@@ -153,10 +186,24 @@ def markdown(table: dict[str, Any]) -> str:
             f"| {head['ukf_only']:.4f} / {head['fused']:.4f} | {r['box']['mean_area_m2']:.4f} | {r['box']['mean_width_m']:.3f} "
             f"| {r['epoch_ms_median']:.1f} | {r['epoch_ms_p95']:.1f} | {r['containment']:.3f} | {r['empty_epochs']} / {r['lost_epochs']} |"
         )
-    lines += ["", "Box area: (x, y) area of the union of the outer boxes of each epoch, mean over epochs.", ""]
+    lines += [
+        "",
+        "Box area: (x, y) area of the union of the outer boxes of each epoch, mean over epochs.",
+        "",
+    ]
     lines += ["## The paper's claims on this run", ""]
-    lines += [f"- {'holds' if ok else 'DOES NOT HOLD'}: {claim}" for claim, ok in table["claims"].items()]
-    lines += ["", "## Settings", "", "```", *(f"{k} = {'auto' if v is None else v}" for k, v in table["estimation"].items()), "```", ""]
+    lines += [
+        f"- {'holds' if ok else 'DOES NOT HOLD'}: {claim}" for claim, ok in table["claims"].items()
+    ]
+    lines += [
+        "",
+        "## Settings",
+        "",
+        "```",
+        *(f"{k} = {'auto' if v is None else v}" for k, v in table["estimation"].items()),
+        "```",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -175,8 +222,12 @@ def figures(plt, folder: Path, spec, log, runs: dict[str, Estimation]) -> None:
         ax.plot(log.pose[:, 0], log.pose[:, 1], color="tab:green", lw=1.2, label="truth")
         ax.plot(ukf[:, 0], ukf[:, 1], color="tab:blue", lw=0.8, alpha=0.6, label="UKF only")
         fused = estimation.pose[FUSED]
-        ax.plot(fused[:, 0], fused[:, 1], color="tab:orange", lw=1.0, label=f"fused ({tracker.upper()})")
-        ax.set_title(f"Fig. {number}: fused estimate, {tracker.upper()} boxes (every {BOX_EVERY}th epoch)")
+        ax.plot(
+            fused[:, 0], fused[:, 1], color="tab:orange", lw=1.0, label=f"fused ({tracker.upper()})"
+        )
+        ax.set_title(
+            f"Fig. {number}: fused estimate, {tracker.upper()} boxes (every {BOX_EVERY}th epoch)"
+        )
         _save(plt, fig, ax, folder / f"fig{number}_fused_{tracker}.png")
     fig, ax = plt.subplots(figsize=(8, 3.5))
     for tracker, estimation in runs.items():
@@ -206,8 +257,14 @@ def _draw_boxes(ax, estimation: Estimation) -> None:
     patches = []
     for e in range(0, len(epochs.t_s), BOX_EVERY):
         for box in epochs.epoch_boxes(e):
-            patches.append(Rectangle((box[0, 0], box[1, 0]), box[0, 1] - box[0, 0], box[1, 1] - box[1, 0]))
-    ax.add_collection(PatchCollection(patches, facecolor="tab:red", edgecolor="darkred", lw=0.8, alpha=0.7, zorder=3))
+            patches.append(
+                Rectangle((box[0, 0], box[1, 0]), box[0, 1] - box[0, 0], box[1, 1] - box[1, 0])
+            )
+    ax.add_collection(
+        PatchCollection(
+            patches, facecolor="tab:red", edgecolor="darkred", lw=0.8, alpha=0.7, zorder=3
+        )
+    )
 
 
 def _save(plt, fig, ax, path: Path) -> None:

@@ -141,34 +141,48 @@ def filters() -> dict[str, object]:
     }
 
 
-def simulate(example: Example, runs: int, steps: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def simulate(
+    example: Example, runs: int, steps: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Truth ``(steps + 1, runs, 2)`` from ``x(0)`` and measurements ``(steps, runs, 1)`` of ``x(1..steps)``."""
     chol_w = np.linalg.cholesky(example.process.Q)
     chol_v = np.sqrt(example.measurement.R[0, 0])
     truth = np.empty((steps + 1, runs, 2))
-    truth[0] = example.initial_mean + rng.standard_normal((runs, 2)) @ np.linalg.cholesky(example.initial_cov).T
+    truth[0] = (
+        example.initial_mean
+        + rng.standard_normal((runs, 2)) @ np.linalg.cholesky(example.initial_cov).T
+    )
     for k in range(steps):
-        truth[k + 1] = example.process.f(truth[k], float(k)) + rng.standard_normal((runs, 2)) @ chol_w.T
+        truth[k + 1] = (
+            example.process.f(truth[k], float(k)) + rng.standard_normal((runs, 2)) @ chol_w.T
+        )
     measurements = example.measurement.h(truth[1:]) + chol_v * rng.standard_normal((steps, runs, 1))
     return truth, measurements
 
 
-def evaluate(example: Example, runs: int, steps: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def evaluate(
+    example: Example, runs: int, steps: int, rng: np.random.Generator
+) -> dict[str, np.ndarray]:
     """RMSE over time ``(steps, 2)`` of every filter on one example."""
     truth, measurements = simulate(example, runs, steps, rng)
     start = Gaussian(
-        np.broadcast_to(example.initial_mean, (runs, 2)), np.broadcast_to(example.initial_cov, (runs, 2, 2))
+        np.broadcast_to(example.initial_mean, (runs, 2)),
+        np.broadcast_to(example.initial_cov, (runs, 2, 2)),
     )
     return {
         name: rmse_over_time(
-            run_filter(kf, start, example.process, example.measurement, measurements, lambda k: (float(k),)),
+            run_filter(
+                kf, start, example.process, example.measurement, measurements, lambda k: (float(k),)
+            ),
             truth[1:],
         )
         for name, kf in filters().items()
     }
 
 
-def paper_claims(average: dict[str, np.ndarray], final: dict[str, np.ndarray]) -> dict[str, dict[str, str]]:
+def paper_claims(
+    average: dict[str, np.ndarray], final: dict[str, np.ndarray]
+) -> dict[str, dict[str, str]]:
     """The orderings the paper states, judged on time-averaged (and last-quarter) RMSE."""
     state = {f"x{i + 1}": {name: float(a[i]) for name, a in average.items()} for i in range(2)}
     return {
@@ -203,42 +217,71 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     check_counts(args, "iukf-examples")
     rng = np.random.default_rng(args.seed)
-    table: dict[str, object] = {"paper": "000 (Banani and Masnadi-Shirazi, iterated UKF)", "runs": args.runs,
-                                "steps": args.steps, "seed": args.seed, "choices": CHOICES}
-    md = [f"# Paper 000, examples 1 and 2 ({args.runs} runs, {args.steps} steps, seed {args.seed})", ""]
+    table: dict[str, object] = {
+        "paper": "000 (Banani and Masnadi-Shirazi, iterated UKF)",
+        "runs": args.runs,
+        "steps": args.steps,
+        "seed": args.seed,
+        "choices": CHOICES,
+    }
+    md = [
+        f"# Paper 000, examples 1 and 2 ({args.runs} runs, {args.steps} steps, seed {args.seed})",
+        "",
+    ]
     curves = {}
     for example in EXAMPLES:
         rmse = evaluate(example, args.runs, args.steps, rng)
         curves[example.name] = rmse
         average = {name: r.mean(axis=0) for name, r in rmse.items()}
-        final = {name: r[-max(1, args.steps // 4):].mean(axis=0) for name, r in rmse.items()}
+        final = {name: r[-max(1, args.steps // 4) :].mean(axis=0) for name, r in rmse.items()}
         claims = paper_claims(average, final)[example.name]
         near = {
             "UKF vs EKF": relative_difference(average["UKF"], average["EKF"]),
             "IUKF vs IEKF": relative_difference(average["IUKF"], average["IEKF"]),
         }
         table[example.name] = {
-            "rmse_time_average": {name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in average.items()},
-            "rmse_last_quarter": {name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in final.items()},
+            "rmse_time_average": {
+                name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in average.items()
+            },
+            "rmse_last_quarter": {
+                name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in final.items()
+            },
             "max_relative_rmse_difference": near,
             "paper_orderings_verdict": claims,
         }
-        md += [f"## {example.name.replace('_', ' ').capitalize()}", "", "Time-averaged RMSE (last quarter in brackets):", ""]
-        md.append(markdown_table(
-            ["state", *FILTER_NAMES],
-            [[s] + [f"{average[f][i]:.4g} ({final[f][i]:.4g})" for f in FILTER_NAMES] for i, s in enumerate(("x1", "x2"))],
-        ))
+        md += [
+            f"## {example.name.replace('_', ' ').capitalize()}",
+            "",
+            "Time-averaged RMSE (last quarter in brackets):",
+            "",
+        ]
+        md.append(
+            markdown_table(
+                ["state", *FILTER_NAMES],
+                [
+                    [s] + [f"{average[f][i]:.4g} ({final[f][i]:.4g})" for f in FILTER_NAMES]
+                    for i, s in enumerate(("x1", "x2"))
+                ],
+            )
+        )
         md += [""] + verdict_lines(near, claims, "RMSE")
     md += choices_lines(CHOICES)
     with atomic_directory(args.out) as out:
         write_json(out / "table.json", table)
         write_text(out / "table.md", "\n".join(md))
-        figures = [("fig1_example1_x1.png", "example_1", 0), ("fig2_example1_x2.png", "example_1", 1),
-                   ("fig3_example2_x1.png", "example_2", 0), ("fig4_example2_x2.png", "example_2", 1)]
+        figures = [
+            ("fig1_example1_x1.png", "example_1", 0),
+            ("fig2_example1_x2.png", "example_1", 1),
+            ("fig3_example2_x1.png", "example_2", 0),
+            ("fig4_example2_x2.png", "example_2", 1),
+        ]
         for filename, name, state in figures:
             save_figure(
-                Path(out) / filename, {f: curves[name][f][:, state] for f in FILTER_NAMES}, log_scale=True,
-                ylabel=f"RMSE of x{state + 1}", title=f"{name.replace('_', ' ')}: RMSE of x{state + 1} over {args.runs} runs",
+                Path(out) / filename,
+                {f: curves[name][f][:, state] for f in FILTER_NAMES},
+                log_scale=True,
+                ylabel=f"RMSE of x{state + 1}",
+                title=f"{name.replace('_', ' ')}: RMSE of x{state + 1} over {args.runs} runs",
             )
     print(f"iukf-examples: wrote {args.out}/table.json, table.md and 4 figures")
     return 0

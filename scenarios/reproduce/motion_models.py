@@ -52,7 +52,9 @@ from robotsim.vehicle.single_track import ReferenceDrive
 from scenarios.errors import ScenarioError
 from scenarios.outputs import atomic_directory, write_json, write_text
 
-HELP = "paper 001: CV, CTRV, CTRA, CCA in a GPS + odometry UKF on simulated urban and highway drives"
+HELP = (
+    "paper 001: CV, CTRV, CTRA, CCA in a GPS + odometry UKF on simulated urban and highway drives"
+)
 
 #: Paper 001 footnote 5.
 SIGMA_POINTS = ScaledSigmaPoints(alpha=1e-5, beta=2.0, kappa=None)
@@ -76,10 +78,16 @@ INITIAL_STD = {
 #: Paper 001 table II (RMS in metres), for the side-by-side table.
 PAPER_TABLE_II = {
     "urban": {
-        "CV": (3.17, 2.32, 2.16), "CTRV": (2.36, 1.76, 1.58), "CTRA": (1.85, 1.31, 1.31), "CCA": (2.49, 1.68, 1.84),
+        "CV": (3.17, 2.32, 2.16),
+        "CTRV": (2.36, 1.76, 1.58),
+        "CTRA": (1.85, 1.31, 1.31),
+        "CCA": (2.49, 1.68, 1.84),
     },
     "highway": {
-        "CV": (3.89, 1.67, 3.52), "CTRV": (3.98, 1.52, 3.68), "CTRA": (3.35, 1.35, 3.07), "CCA": (3.36, 1.35, 3.08),
+        "CV": (3.89, 1.67, 3.52),
+        "CTRV": (3.98, 1.52, 3.68),
+        "CTRA": (3.35, 1.35, 3.07),
+        "CCA": (3.36, 1.35, 3.08),
     },
 }
 ERROR_KINDS = ("euclidean", "lateral", "longitudinal")
@@ -108,8 +116,14 @@ def initial_state(model: MotionModel, drive: ReferenceDrive) -> np.ndarray:
     x, y, heading = drive.pose[0]
     v, a, omega = drive.speed_m_s[0], drive.accel_m_s2[0], drive.yaw_rate_rad_s[0]
     values = {
-        "x_m": x, "y_m": y, "theta_rad": heading, "v_m_s": v, "a_m_s2": a, "omega_rad_s": omega,
-        "vx_m_s": v * math.cos(heading), "vy_m_s": v * math.sin(heading),
+        "x_m": x,
+        "y_m": y,
+        "theta_rad": heading,
+        "v_m_s": v,
+        "a_m_s2": a,
+        "omega_rad_s": omega,
+        "vx_m_s": v * math.cos(heading),
+        "vy_m_s": v * math.sin(heading),
         "c_1_m": float(drive.curvature_1_m[0]),
     }
     return np.array([values[name] for name in model.state_names])
@@ -131,14 +145,19 @@ def run_filter(
     process = model.process_model(np.diag(model.process_noise_std(dt_s) ** 2), noise="augmented")
     gps = gps_model(meas.params.gps_noise_std_m**2 * np.eye(2))
     readings = {"speed": meas.speed_m_s, "yaw_rate": meas.yaw_rate_rad_s}  # (R, K) each
-    noise_std = {"speed": meas.params.speed_noise_std_m_s, "yaw_rate": meas.params.yaw_rate_noise_std_rad_s}
+    noise_std = {
+        "speed": meas.params.speed_noise_std_m_s,
+        "yaw_rate": meas.params.yaw_rate_noise_std_rad_s,
+    }
     odometry = MeasurementModel(
         h=model.odometry, R=np.diag([noise_std[name] ** 2 for name in model.odometry_names])
     )
     odo_z = np.stack([readings[name] for name in model.odometry_names], axis=-1)  # (R, K, m)
     std0 = np.array([INITIAL_STD[name] for name in model.state_names])
     mean = initial_state(model, drive) + std0 * draws[:, : model.n]
-    belief = Gaussian(mean, np.broadcast_to(np.diag(std0**2), (runs, model.n, model.n)), model.angle_indices)
+    belief = Gaussian(
+        mean, np.broadcast_to(np.diag(std0**2), (runs, model.n, model.n)), model.angle_indices
+    )
     out = np.empty((runs, epochs, 2))
     gps_k = 0
     start = time.perf_counter()
@@ -180,7 +199,9 @@ def rms(values: np.ndarray, epochs: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(np.square(values[:, epochs])))) if epochs.any() else None
 
 
-def experiment(runs: int, seed: int, duration_s: float, sensors: VehicleSensorParams | None = None) -> dict:
+def experiment(
+    runs: int, seed: int, duration_s: float, sensors: VehicleSensorParams | None = None
+) -> dict:
     """Run the whole comparison (no I/O). Returns the results and, under ``"series"``, the
     per-epoch RMS-over-runs Euclidean errors and masks the figures need."""
     sensors = sensors or VehicleSensorParams()
@@ -192,13 +213,19 @@ def experiment(runs: int, seed: int, duration_s: float, sensors: VehicleSensorPa
     series: dict = {}
     drives: dict = {}
     for offset, (drive_name, make_drive) in enumerate(DRIVES.items()):
-        drive = make_drive(np.random.default_rng([*drive_seed.generate_state(2), offset]), duration_s)
-        meas = measure(drive, sensors, np.random.default_rng([*sensor_seed.generate_state(2), offset]), runs)
+        drive = make_drive(
+            np.random.default_rng([*drive_seed.generate_state(2), offset]), duration_s
+        )
+        meas = measure(
+            drive, sensors, np.random.default_rng([*sensor_seed.generate_state(2), offset]), runs
+        )
         settled = meas.t_s >= WARM_UP_S
         masks = {
             "all": settled,
-            "high_yaw_rate": settled & (np.abs(drive.yaw_rate_rad_s[meas.drive_index]) > HIGH_YAW_RATE_RAD_S),
-            "high_acceleration": settled & (np.abs(drive.accel_m_s2[meas.drive_index]) > HIGH_ACCEL_M_S2),
+            "high_yaw_rate": settled
+            & (np.abs(drive.yaw_rate_rad_s[meas.drive_index]) > HIGH_YAW_RATE_RAD_S),
+            "high_acceleration": settled
+            & (np.abs(drive.accel_m_s2[meas.drive_index]) > HIGH_ACCEL_M_S2),
         }
         table[drive_name], restricted[drive_name], cost[drive_name] = {}, {}, {}
         series[drive_name] = {"t_s": meas.t_s, "masks": masks, "euclidean": {}}
@@ -206,12 +233,17 @@ def experiment(runs: int, seed: int, duration_s: float, sensors: VehicleSensorPa
         for model_name, model in MODELS.items():
             result = run_filter(model, drive, meas, draws)
             errors = position_errors(result.position_m, drive, meas)
-            table[drive_name][model_name] = {kind: rms(errors[kind], settled) for kind in ERROR_KINDS}
+            table[drive_name][model_name] = {
+                kind: rms(errors[kind], settled) for kind in ERROR_KINDS
+            }
             restricted[drive_name][model_name] = {
-                name: rms(errors["euclidean"], masks[name]) for name in ("high_yaw_rate", "high_acceleration")
+                name: rms(errors["euclidean"], masks[name])
+                for name in ("high_yaw_rate", "high_acceleration")
             }
             cost[drive_name][model_name] = 1e6 * result.seconds / (runs * meas.t_s.size)
-            series[drive_name]["euclidean"][model_name] = np.sqrt(np.mean(np.square(errors["euclidean"]), axis=0))
+            series[drive_name]["euclidean"][model_name] = np.sqrt(
+                np.mean(np.square(errors["euclidean"]), axis=0)
+            )
         restricted[drive_name]["epochs"] = {name: int(mask.sum()) for name, mask in masks.items()}
     return {
         "settings": {
@@ -219,9 +251,14 @@ def experiment(runs: int, seed: int, duration_s: float, sensors: VehicleSensorPa
             "seed": seed,
             "duration_s": duration_s,
             "warm_up_s": WARM_UP_S,
-            "sigma_points": {"alpha": SIGMA_POINTS.alpha, "beta": SIGMA_POINTS.beta, "kappa": "3 - L"},
+            "sigma_points": {
+                "alpha": SIGMA_POINTS.alpha,
+                "beta": SIGMA_POINTS.beta,
+                "kappa": "3 - L",
+            },
             "process_noise_intensity": {
-                m.name: dict(zip(m.noise_names, m.noise_intensity, strict=True)) for m in MODELS.values()
+                m.name: dict(zip(m.noise_names, m.noise_intensity, strict=True))
+                for m in MODELS.values()
             },
             "sensors": asdict(sensors),
             "initial_std": INITIAL_STD,
@@ -253,7 +290,9 @@ def findings(table: dict, restricted: dict) -> dict[str, dict[str, bool | None]]
         eu = {m: row[m]["euclidean"] for m in row}
         r = restricted[drive]
         out[drive] = {
-            "curvilinear_beat_cv": all(_smaller(eu[m], eu["CV"], FINDING_MARGIN) for m in ("CTRV", "CTRA", "CCA")),
+            "curvilinear_beat_cv": all(
+                _smaller(eu[m], eu["CV"], FINDING_MARGIN) for m in ("CTRV", "CTRA", "CCA")
+            ),
             "ctrv_beats_cv_at_high_yaw_rate": _smaller(
                 r["CTRV"]["high_yaw_rate"], r["CV"]["high_yaw_rate"], FINDING_MARGIN
             ),
@@ -295,18 +334,26 @@ def table_markdown(results: dict) -> str:
     for drive, row in results["restricted_euclidean"].items():
         for subset in ("high_yaw_rate", "high_acceleration"):
             cells = ["n/a" if row[m][subset] is None else f"{row[m][subset]:.2f}" for m in models]
-            lines.append(f"| {drive} | {subset} | {row['epochs'][subset]} | " + " | ".join(cells) + " |")
+            lines.append(
+                f"| {drive} | {subset} | {row['epochs'][subset]} | " + " | ".join(cells) + " |"
+            )
         cost = results["cost_us_per_run_step"][drive]
-        lines.append(f"| {drive} | cost [us per run-step] | | " + " | ".join(f"{cost[m]:.1f}" for m in models) + " |")
+        lines.append(
+            f"| {drive} | cost [us per run-step] | | "
+            + " | ".join(f"{cost[m]:.1f}" for m in models)
+            + " |"
+        )
     lines += [
         "",
-        f"Paper 001's findings, checked on these numbers (\"beats\": an RMS at least "
+        f'Paper 001\'s findings, checked on these numbers ("beats": an RMS at least '
         f"{100 * FINDING_MARGIN:.0f} % smaller):",
         "",
     ]
     for drive, checks in results["findings"].items():
         for name, holds in checks.items():
-            verdict = {True: "holds", False: "does NOT hold", None: "not evaluable (no epochs)"}[holds]
+            verdict = {True: "holds", False: "does NOT hold", None: "not evaluable (no epochs)"}[
+                holds
+            ]
             lines.append(f"- {drive}: {name.replace('_', ' ')}: {verdict}")
     lines += [
         "",
@@ -334,8 +381,15 @@ def write_figures(folder: Path, results: dict) -> None:
         fig, ax = plt.subplots(figsize=(9, 3.5))
         if subset is not None:
             mask = data["masks"][subset]
-            ax.fill_between(data["t_s"], 0, 1, where=mask, transform=ax.get_xaxis_transform(),
-                            color="0.85", label=subset.replace("_", " "))
+            ax.fill_between(
+                data["t_s"],
+                0,
+                1,
+                where=mask,
+                transform=ax.get_xaxis_transform(),
+                color="0.85",
+                label=subset.replace("_", " "),
+            )
         for model in pair:
             restricted = results["restricted_euclidean"][drive][model]
             label = f"{model} (RMS {results['table'][drive][model]['euclidean']:.2f} m"
@@ -364,10 +418,16 @@ def write_figures(folder: Path, results: dict) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``robotsim reproduce motion-models``."""
-    parser.add_argument("--runs", type=int, default=20, help="Monte Carlo runs per drive (default 20)")
+    parser.add_argument(
+        "--runs", type=int, default=20, help="Monte Carlo runs per drive (default 20)"
+    )
     parser.add_argument("--out", default="runs/reproduce/motion-models", help="output folder")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the drives and sensor noise (default 1)")
-    parser.add_argument("--duration", type=float, default=300.0, help="length of each drive in s (default 300)")
+    parser.add_argument(
+        "--seed", type=int, default=1, help="seed of the drives and sensor noise (default 1)"
+    )
+    parser.add_argument(
+        "--duration", type=float, default=300.0, help="length of each drive in s (default 300)"
+    )
     parser.add_argument(
         "--unbiased-odometry",
         action="store_true",
@@ -382,7 +442,9 @@ def main(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise ScenarioError(None, "--seed", f"must be >= 0, got {args.seed}")
     if not (math.isfinite(args.duration) and args.duration >= 2.0 * WARM_UP_S):
-        raise ScenarioError(None, "--duration", f"must be >= {2.0 * WARM_UP_S:.0f} s, got {args.duration}")
+        raise ScenarioError(
+            None, "--duration", f"must be >= {2.0 * WARM_UP_S:.0f} s, got {args.duration}"
+        )
     sensors = VehicleSensorParams()
     if args.unbiased_odometry:
         sensors = replace(sensors, speed_scale_error=0.0, yaw_rate_bias_rad_s=0.0)

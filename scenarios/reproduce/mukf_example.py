@@ -50,7 +50,9 @@ from scenarios.reproduce._filter_runs import (
     verdict_lines,
 )
 
-HELP = "paper 004: EKF, MEKF, UKF and MUKF identifying x3 in cases a and b (MSE tables, figures 1-2)"
+HELP = (
+    "paper 004: EKF, MEKF, UKF and MUKF identifying x3 in cases a and b (MSE tables, figures 1-2)"
+)
 
 FILTER_NAMES = ("EKF", "MEKF", "UKF", "MUKF")
 STATES = ("x1", "x2", "x3")
@@ -63,10 +65,18 @@ R = np.array([[1e-5]])
 POINTS = SpreadSigmaPoints(a=0.1)
 #: Paper 004 tables 2 and 3 (MSE), for the side-by-side table.
 PAPER_MSE = {
-    "case_a": {"EKF": (0.0001702, 0.0025883, 0.004326), "MEKF": (0.0001752, 0.0025893, 0.004019),
-               "UKF": (0.0001822, 0.0026913, 0.004229), "MUKF": (0.0001752, 0.0025633, 0.003973)},
-    "case_b": {"EKF": (0.0001852, 0.0028743, 0.0057051), "MEKF": (0.000189, 0.002924, 0.005453),
-               "UKF": (0.000205, 0.003013, 0.005513), "MUKF": (0.0001882, 0.0028963, 0.005344)},
+    "case_a": {
+        "EKF": (0.0001702, 0.0025883, 0.004326),
+        "MEKF": (0.0001752, 0.0025893, 0.004019),
+        "UKF": (0.0001822, 0.0026913, 0.004229),
+        "MUKF": (0.0001752, 0.0025633, 0.003973),
+    },
+    "case_b": {
+        "EKF": (0.0001852, 0.0028743, 0.0057051),
+        "MEKF": (0.000189, 0.002924, 0.005453),
+        "UKF": (0.000205, 0.003013, 0.005513),
+        "MUKF": (0.0001882, 0.0028963, 0.005344),
+    },
 }
 
 CHOICES = {
@@ -83,7 +93,14 @@ CHOICES = {
 
 def transition(s, *_):
     """Eq. 22: ``(..., 3) -> (..., 3)``."""
-    return np.stack([(1.0 - 0.1 * s[..., 2]) * s[..., 0] + 0.1 * s[..., 1], -0.1 * s[..., 0] + s[..., 1], s[..., 2]], axis=-1)
+    return np.stack(
+        [
+            (1.0 - 0.1 * s[..., 2]) * s[..., 0] + 0.1 * s[..., 1],
+            -0.1 * s[..., 0] + s[..., 1],
+            s[..., 2],
+        ],
+        axis=-1,
+    )
 
 
 def transition_jacobian(s, *_):
@@ -108,7 +125,9 @@ def linear_observation(x, y, *_):
 
 PROCESS = ProcessModel(transition, Q, jacobian=transition_jacobian)
 MEASUREMENT = MeasurementModel(
-    lambda s: s[..., :1], R, jacobian=lambda s: np.broadcast_to(np.array([[1.0, 0.0, 0.0]]), s.shape[:-1] + (1, 3))
+    lambda s: s[..., :1],
+    R,
+    jacobian=lambda s: np.broadcast_to(np.array([[1.0, 0.0, 0.0]]), s.shape[:-1] + (1, 3)),
 )
 SUBSYSTEM = LinearSubsystem(2, linear_transition, linear_observation)
 
@@ -118,7 +137,9 @@ def true_parameter(case: str, k: np.ndarray) -> np.ndarray:
     return np.ones_like(k, dtype=float) if case == "case_a" else 1.0 + 0.01 * k
 
 
-def simulate(case: str, runs: int, steps: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def simulate(
+    case: str, runs: int, steps: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Truth ``(steps + 1, runs, 3)`` and measurements ``(steps, runs, 1)`` of ``x(1..steps)``."""
     truth = np.empty((steps + 1, runs, 3))
     truth[0] = TRUE_INITIAL_STATE
@@ -142,10 +163,14 @@ def filters() -> dict[str, object]:
     }
 
 
-def evaluate(case: str, runs: int, steps: int, rng: np.random.Generator) -> tuple[dict, dict, np.ndarray, dict]:
+def evaluate(
+    case: str, runs: int, steps: int, rng: np.random.Generator
+) -> tuple[dict, dict, np.ndarray, dict]:
     """MSE ``(3,)`` per filter, run-averaged ``x3`` estimates ``(steps,)``, the truth, repair counts."""
     truth, measurements = simulate(case, runs, steps, rng)
-    start = Gaussian(np.broadcast_to(INITIAL_ESTIMATE, (runs, 3)), np.broadcast_to(INITIAL_COV, (runs, 3, 3)))
+    start = Gaussian(
+        np.broadcast_to(INITIAL_ESTIMATE, (runs, 3)), np.broadcast_to(INITIAL_COV, (runs, 3, 3))
+    )
     mse, x3_mean, repairs = {}, {}, {}
     for name, kf in filters().items():
         belief = kf.initial(start) if isinstance(kf, ModifiedKalmanFilter) else start
@@ -162,10 +187,16 @@ def paper_claims(mse: dict[str, np.ndarray]) -> dict[str, str]:
     """The orderings paper 004 states (section 4), judged on the MSE."""
     state = {s: {name: float(m[i]) for name, m in mse.items()} for i, s in enumerate(STATES)}
     return {
-        "MUKF better than UKF for every state": judge([(state[s]["MUKF"], state[s]["UKF"]) for s in STATES]),
+        "MUKF better than UKF for every state": judge(
+            [(state[s]["MUKF"], state[s]["UKF"]) for s in STATES]
+        ),
         "x3: MUKF best of the four": judge(best_of(state["x3"], "MUKF")),
-        "x3: MEKF better than EKF and UKF": judge([(state["x3"]["MEKF"], state["x3"][f]) for f in ("EKF", "UKF")]),
-        "x1, x2: EKF best of the four": judge(best_of(state["x1"], "EKF") + best_of(state["x2"], "EKF")),
+        "x3: MEKF better than EKF and UKF": judge(
+            [(state["x3"]["MEKF"], state["x3"][f]) for f in ("EKF", "UKF")]
+        ),
+        "x1, x2: EKF best of the four": judge(
+            best_of(state["x1"], "EKF") + best_of(state["x2"], "EKF")
+        ),
     }
 
 
@@ -181,9 +212,17 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     check_counts(args, "mukf-example")
     rng = np.random.default_rng(args.seed)
-    table: dict[str, object] = {"paper": "004 (Babacan, Doroslovacki and Ozbek, modified UKF)", "runs": args.runs,
-                                "steps": args.steps, "seed": args.seed, "choices": CHOICES}
-    md = [f"# Paper 004, cases a and b ({args.runs} runs, {args.steps} steps, seed {args.seed})", ""]
+    table: dict[str, object] = {
+        "paper": "004 (Babacan, Doroslovacki and Ozbek, modified UKF)",
+        "runs": args.runs,
+        "steps": args.steps,
+        "seed": args.seed,
+        "choices": CHOICES,
+    }
+    md = [
+        f"# Paper 004, cases a and b ({args.runs} runs, {args.steps} steps, seed {args.seed})",
+        "",
+    ]
     curves = {}
     for case in ("case_a", "case_b"):
         mse, x3_mean, x3_true, repairs = evaluate(case, args.runs, args.steps, rng)
@@ -195,17 +234,26 @@ def main(args: argparse.Namespace) -> int:
         }
         table[case] = {
             "mse": {name: dict(zip(STATES, map(float, m), strict=True)) for name, m in mse.items()},
-            "paper_mse": {name: dict(zip(STATES, m, strict=True)) for name, m in PAPER_MSE[case].items()},
+            "paper_mse": {
+                name: dict(zip(STATES, m, strict=True)) for name, m in PAPER_MSE[case].items()
+            },
             "covariance_repairs": repairs,
             "max_relative_mse_difference": near,
             "paper_orderings_verdict": claims,
         }
         md += [f"## Case {case[-1]}", "", "MSE (paper's tables 2-3 in brackets):", ""]
-        md.append(markdown_table(
-            ["state", *FILTER_NAMES],
-            [[s] + [f"{mse[f][i]:.4g} ({PAPER_MSE[case][f][i]:.4g})" for f in FILTER_NAMES] for i, s in enumerate(STATES)],
-        ))
-        md += ["", f"Covariance repairs (steps with a jitter): {repairs}", ""] + verdict_lines(near, claims, "MSE")
+        md.append(
+            markdown_table(
+                ["state", *FILTER_NAMES],
+                [
+                    [s] + [f"{mse[f][i]:.4g} ({PAPER_MSE[case][f][i]:.4g})" for f in FILTER_NAMES]
+                    for i, s in enumerate(STATES)
+                ],
+            )
+        )
+        md += ["", f"Covariance repairs (steps with a jitter): {repairs}", ""] + verdict_lines(
+            near, claims, "MSE"
+        )
     md += choices_lines(CHOICES)
     with atomic_directory(args.out) as out:
         write_json(out / "table.json", table)
@@ -213,7 +261,10 @@ def main(args: argparse.Namespace) -> int:
         for filename, case in (("fig1_x3_case_a.png", "case_a"), ("fig2_x3_case_b.png", "case_b")):
             x3_mean, x3_true = curves[case]
             save_figure(
-                Path(out) / filename, x3_mean, reference=x3_true, ylabel=f"x3 estimate (mean of {args.runs} runs)",
+                Path(out) / filename,
+                x3_mean,
+                reference=x3_true,
+                ylabel=f"x3 estimate (mean of {args.runs} runs)",
                 title=f"paper 004 {case.replace('_', ' ')}: estimation of x3",
             )
     print(f"mukf-example: wrote {args.out}/table.json, table.md and 2 figures")

@@ -29,8 +29,11 @@ _finite = st.one_of(
 def interval_and_point(draw, bounded=False, lo_min=None):
     """(interval (2,), finite point inside it): sorted triple, degenerate, or unbounded."""
     x = draw(_finite)
-    kind = draw(st.sampled_from(["sorted", "degenerate", "unbounded"] if not bounded
-                                else ["sorted", "degenerate"]))
+    kind = draw(
+        st.sampled_from(
+            ["sorted", "degenerate", "unbounded"] if not bounded else ["sorted", "degenerate"]
+        )
+    )
     if kind == "degenerate":
         lo = hi = x
     else:
@@ -132,9 +135,14 @@ def test_vectorised_operations_contain_random_points():
     pts = np.clip(pts, bounds[..., 0], bounds[..., 1])
     a, b, x, y = bounds[:, 0], bounds[:, 1], pts[:, 0], pts[:, 1]
     for op, val in (
-        (ia.add(a, b), x + y), (ia.sub(a, b), x - y), (ia.mul(a, b), x * y),
-        (ia.sqr(a), x * x), (ia.sin(a), np.sin(x)), (ia.cos(a), np.cos(x)),
-        (ia.cos_sin(a)[0], np.cos(x)), (ia.cos_sin(a)[1], np.sin(x)),
+        (ia.add(a, b), x + y),
+        (ia.sub(a, b), x - y),
+        (ia.mul(a, b), x * y),
+        (ia.sqr(a), x * x),
+        (ia.sin(a), np.sin(x)),
+        (ia.cos(a), np.cos(x)),
+        (ia.cos_sin(a)[0], np.cos(x)),
+        (ia.cos_sin(a)[1], np.sin(x)),
     ):
         assert np.all(ia.contains(op, val))
     nz = ~((b[:, 0] <= 0) & (b[:, 1] >= 0))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from intervals import rays
+from intervals.boxes import contains_points, volume
 from intervals.errors import IntervalError
 from intervals.rays import (
     joint_rejection_counts,
@@ -20,7 +21,6 @@ from intervals.rays import (
     ray_rejections,
     sub_boxes,
 )
-from intervals.boxes import contains_points, volume
 from intervals.sonar import SonarBelt, SonarScan, _uses_ray_test, gomne, localize, sensor_verdicts
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
@@ -44,15 +44,22 @@ def _random_map(rng):
 def _random_belt(rng, gamma):
     """The default 16-sonar belt, or 8 sensors with random mounts and axes (not radial)."""
     if rng.random() < 0.5:
-        return SonarBeltParams.default_belt(half_aperture_rad=gamma, d_max_m=rng.choice([3.0, 100.0]))
+        return SonarBeltParams.default_belt(
+            half_aperture_rad=gamma, d_max_m=rng.choice([3.0, 100.0])
+        )
     mounts = rng.uniform(-0.3, 0.3, size=(8, 2))
-    return SonarBeltParams(mount_xy=mounts, mount_angle_rad=rng.uniform(-np.pi, np.pi, 8),
-                           half_aperture_rad=gamma, d_max_m=rng.choice([3.0, 100.0]))
+    return SonarBeltParams(
+        mount_xy=mounts,
+        mount_angle_rad=rng.uniform(-np.pi, np.pi, 8),
+        half_aperture_rad=gamma,
+        d_max_m=rng.choice([3.0, 100.0]),
+    )
 
 
 def _distances(poses, segments, params):
-    return cone_distances(poses, segments, params.mount_xy, params.mount_angle_rad,
-                          params.half_aperture_rad)
+    return cone_distances(
+        poses, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad
+    )
 
 
 def _readings(d, params, rng):
@@ -107,7 +114,10 @@ def test_boxes_holding_the_truth_are_never_rejected(gamma):
         subs = sub_boxes(boxes, pieces)
         held = np.all((subs[..., 0] <= truth) & (subs[..., 1] >= truth), axis=-1)  # (N, P)
         rejected = piece_rejections(boxes, scan, pieces)
-        assert not np.any(rejected.any(axis=2) & held), (case, np.argwhere(rejected & held[..., None])[:4])
+        assert not np.any(rejected.any(axis=2) & held), (
+            case,
+            np.argwhere(rejected & held[..., None])[:4],
+        )
 
 
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
@@ -161,13 +171,16 @@ def test_rejects_boxes_the_sonar_test_keeps(gamma):
     the other way round, on the real belt (12.5 deg) some (its cone-edge free-space rays)."""
     rng = np.random.default_rng(5)
     hall = builtin_map("hall")
-    params = SonarBeltParams.default_belt(half_aperture_rad=gamma, d_max_m=100.0 if gamma < 0.1 else 3.0)
+    params = SonarBeltParams.default_belt(
+        half_aperture_rad=gamma, d_max_m=100.0 if gamma < 0.1 else 3.0
+    )
     belt = SonarBelt.from_params(params, echoes_never_lost=True)
     only_rays = only_sonar = 0
     for truth in ([2.0, 6.0, 0.3], [5.0, 3.0, -2.0], [8.5, 6.5, 1.4], [4.0, 1.0, 3.0]):
         truth = np.array(truth)
-        scan = SonarScan(hall.segments, belt, _readings(_distances(truth, hall.segments, params),
-                                                        params, rng))
+        scan = SonarScan(
+            hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+        )
         centre = truth + rng.uniform(-1, 1, (300, 3)) * np.array([0.05, 0.05, 0.03])
         boxes = np.stack([centre - 0.02, centre + 0.02], axis=-1)
         by_rays = ray_rejections(boxes, scan).any(axis=1)
@@ -184,8 +197,9 @@ def test_rejects_boxes_the_sonar_test_keeps(gamma):
 def test_free_space_ray_fires_on_a_no_echo_reading():
     """A sensor facing a wall 1 m away reports no echo (d_max 3 m, echoes never lost): the
     box is rejected by that sensor alone, through the free-space test."""
-    params = SonarBeltParams(mount_xy=np.zeros((1, 2)), mount_angle_rad=np.zeros(1),
-                             half_aperture_rad=1e-6)
+    params = SonarBeltParams(
+        mount_xy=np.zeros((1, 2)), mount_angle_rad=np.zeros(1), half_aperture_rad=1e-6
+    )
     belt = SonarBelt.from_params(params, echoes_never_lost=True)
     wall = np.array([[[1.0, -1.0], [1.0, 1.0]]])
     box = np.array([[-0.05, 0.05], [-0.05, 0.05], [-0.1, 0.1]])
@@ -213,8 +227,11 @@ def test_sine_terms_enclose_sampled_values():
 
 
 def test_bad_arguments_raise_interval_error():
-    scan = SonarScan(builtin_map("hall").segments,
-                     SonarBelt.from_params(SonarBeltParams.default_belt()), np.full(16, 1.0))
+    scan = SonarScan(
+        builtin_map("hall").segments,
+        SonarBelt.from_params(SonarBeltParams.default_belt()),
+        np.full(16, 1.0),
+    )
     box = np.array([[1.0, 2.0], [1.0, 2.0], [0.0, 0.1]])
     with pytest.raises(IntervalError, match="SonarScan"):
         ray_rejections(box, object())
@@ -235,8 +252,9 @@ def test_sonar_verdicts_and_rays_agree_on_the_truth_box_of_the_real_belt():
     hall = builtin_map("hall")
     belt = SonarBelt.from_params(params, echoes_never_lost=True)
     truth = np.array([5.0, 4.0, 0.7])
-    scan = SonarScan(hall.segments, belt, _readings(_distances(truth, hall.segments, params),
-                                                    params, rng))
+    scan = SonarScan(
+        hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+    )
     boxes = np.stack([truth - 0.02, truth + 0.02], axis=-1)[None]
     assert not ray_rejections(boxes, scan).any() and not sensor_verdicts(boxes, scan)[0].any()
     moved = boxes + np.array([0.5, 0.0, 0.0])[:, None]
@@ -269,8 +287,9 @@ def test_joint_test_rejects_what_no_single_sensor_can():
     joint_only = 0
     for _ in range(8):
         truth = np.array([*rng.uniform([1, 1], [9, 7]), rng.uniform(-np.pi, np.pi)])
-        scan = SonarScan(hall.segments, belt, _readings(_distances(truth, hall.segments, params),
-                                                        params, rng))
+        scan = SonarScan(
+            hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+        )
         centre = truth + rng.uniform(-1, 1, (150, 3)) * np.array([0.1, 0.1, 0.1])
         boxes = np.stack([centre - 0.03, centre + 0.03], axis=-1)
         single = ray_rejections(boxes, scan, (1, 1, 4)).any(axis=1)

@@ -63,8 +63,9 @@ def test_sivia_min_level_boxes_keeps_every_feasible_point_with_fewer_calls():
     pavings = {}
     for minimum, calls in sizes.items():
         counted = lambda b, calls=calls: calls.append(b.shape[0]) or test(b)  # noqa: E731
-        pavings[minimum] = sivia(counted, np.array([[-6.0, 6.0], [-6.0, 6.0]]), eps=0.05,
-                                 min_level_boxes=minimum)
+        pavings[minimum] = sivia(
+            counted, np.array([[-6.0, 6.0], [-6.0, 6.0]]), eps=0.05, min_level_boxes=minimum
+        )
     assert sizes[1][0] == 1 and sizes[64][0] == 64  # the initial box is bisected 6 times first
     assert len(sizes[64]) < len(sizes[1]) and min(sizes[64][:-1]) >= 64 // 2
     g = np.linspace(-6, 6, 241)
@@ -118,11 +119,14 @@ def test_area_xy_matches_shapely_union():
 
 
 def test_components_join_across_the_heading_cut():
-    boxes = np.array([
-        [[0, 1], [0, 1], [3.0, np.pi]],
-        [[0.5, 1.5], [0, 1], [-np.pi, -3.0]],  # same place, heading across +-pi
-        [[5, 6], [5, 6], [0, 1]],
-    ], dtype=float)
+    boxes = np.array(
+        [
+            [[0, 1], [0, 1], [3.0, np.pi]],
+            [[0.5, 1.5], [0, 1], [-np.pi, -3.0]],  # same place, heading across +-pi
+            [[5, 6], [5, 6], [0, 1]],
+        ],
+        dtype=float,
+    )
     count, labels = bx.connected_components(boxes, periodic_axis=2)
     assert count == 2 and labels[0] == labels[1] != labels[2]
     assert bx.connected_components(boxes)[0] == 3
@@ -148,8 +152,13 @@ def test_imagesp_encloses_image_of_random_points():
     u = rng.uniform(size=(20_000, 2))
     pts = src[k, :, 0] + u * (src[k, :, 1] - src[k, :, 0])
     a = rng.uniform(0.3, 0.35, 20_000)
-    img = np.stack([np.cos(a) * pts[:, 0] - np.sin(a) * pts[:, 1] + 1.0,
-                    np.sin(a) * pts[:, 0] + np.cos(a) * pts[:, 1]], axis=1)
+    img = np.stack(
+        [
+            np.cos(a) * pts[:, 0] - np.sin(a) * pts[:, 1] + 1.0,
+            np.sin(a) * pts[:, 0] + np.cos(a) * pts[:, 1],
+        ],
+        axis=1,
+    )
     assert np.all(np.any(bx.contains_points(cells, img), axis=0))
     assert bx.area_xy(cells) < 1.5 * (0.5 + 0.3) + 0.5  # regular, not the hull of everything
     with pytest.raises(IntervalError, match="max_cells"):

@@ -179,15 +179,21 @@ def test_global_localisation_in_symmetric_keeps_the_twin():
     for _ in range(2):
         truth = np.array([*centre, 0.0])
         while np.linalg.norm(truth[:2] - centre) < 1.0:
-            truth = np.array([*rng.uniform(room.bounds[:, 0] + 1.0, room.bounds[:, 1] - 1.0),
-                              rng.uniform(-np.pi, np.pi)])
+            truth = np.array(
+                [
+                    *rng.uniform(room.bounds[:, 0] + 1.0, room.bounds[:, 1] - 1.0),
+                    rng.uniform(-np.pi, np.pi),
+                ]
+            )
         x, y, th = truth
         cx, cy = 2 * centre
-        images = np.array([
-            [cx - x, cy - y, th + np.pi],  # half turn about the centre
-            [cx - x, y, np.pi - th],  # mirror x
-            [x, cy - y, -th],  # mirror y
-        ])
+        images = np.array(
+            [
+                [cx - x, cy - y, th + np.pi],  # half turn about the centre
+                [cx - x, y, np.pi - th],  # mirror x
+                [x, cy - y, -th],  # mirror y
+            ]
+        )
         images[:, 2] = np.mod(images[:, 2] + np.pi, 2 * np.pi) - np.pi
         readings = _readings(_distances(truth, room.segments), PARAMS, rng)
         scan = SonarScan(room.segments, belt, readings, room.boundary)
@@ -226,7 +232,9 @@ def test_sensor_boxes_hold_every_sensor_position_and_cone_direction():
     m = 64
     t = rng.uniform(0, 1, (n, m, 3))
     t[:, :8] = np.round(t[:, :8])  # corners
-    poses = boxes[None, :, :, 0].transpose(1, 0, 2) + t * (boxes[:, None, :, 1] - boxes[:, None, :, 0])
+    poses = boxes[None, :, :, 0].transpose(1, 0, 2) + t * (
+        boxes[:, None, :, 1] - boxes[:, None, :, 0]
+    )
     c, s_ = np.cos(poses[..., 2]), np.sin(poses[..., 2])
     mx, my = belt.mount_xy[:, 0], belt.mount_xy[:, 1]
     sx = poses[..., 0, None] + c[..., None] * mx - s_[..., None] * my  # (n, m, k)

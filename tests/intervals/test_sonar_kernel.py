@@ -18,6 +18,8 @@ from intervals.errors import IntervalError
 from intervals.interval import TRIG_EXACT_LIMIT_RAD
 from intervals.sivia import INSIDE, OUTSIDE
 from intervals.sonar import (
+    _ANGLE_MARGIN_RAD,
+    _ARC_SLACK,
     ECHO,
     ENGINES,
     FREE,
@@ -25,12 +27,13 @@ from intervals.sonar import (
     IGNORED,
     SonarBelt,
     SonarScan,
+    _heading_trig,
+    _sensor_boxes,
     box_test,
     gomne,
     localize,
     sensor_verdicts,
 )
-from intervals.sonar import _ANGLE_MARGIN_RAD, _ARC_SLACK, _heading_trig, _sensor_boxes
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
 from tests.intervals.test_sonar import PARAMS, _boxes_around, _distances, _random_map, _readings
@@ -67,8 +70,7 @@ def _special_boxes(truth, rng) -> np.ndarray:
     +-pi, untrusted, at least a full turn, with a bound on an axis direction, single poses."""
     n = 60
     centre = truth + np.column_stack([rng.uniform(-1, 1, (n, 2)), np.zeros(n)])
-    half = np.column_stack([np.exp(rng.uniform(-12, -1, (n, 2))),
-                            np.exp(rng.uniform(-20, 1, n))])
+    half = np.column_stack([np.exp(rng.uniform(-12, -1, (n, 2))), np.exp(rng.uniform(-20, 1, n))])
     centre[:20, 2] = rng.choice([-np.pi, np.pi], 20) + rng.uniform(-0.05, 0.05, 20)  # the cut
     centre[20:30, 2] = rng.uniform(-4 * np.pi, 4 * np.pi, 10)  # beyond +-pi
     centre[30:35, 2] = rng.choice([-1, 1], 5) * rng.uniform(1.0, 2.0, 5) * TRIG_EXACT_LIMIT_RAD
@@ -100,8 +102,17 @@ def test_compiled_verdicts_equal_the_numpy_reference():
     """200 random cases x 180 boxes: per-sensor reject / certain and the box verdicts at
     q = 0..3 agree everywhere; the cases reach every kind of reading and verdict."""
     rng = np.random.default_rng(31)
-    seen = dict(reject=0, keep=0, certain=0, free=0, ignored=0, impossible=0, inside=0,
-                outside=0, sensor_verdicts=0)
+    seen = dict(
+        reject=0,
+        keep=0,
+        certain=0,
+        free=0,
+        ignored=0,
+        impossible=0,
+        inside=0,
+        outside=0,
+        sensor_verdicts=0,
+    )
     for _ in range(200):
         scan, boxes = _case(rng)
         for inner in (True, False):
@@ -120,8 +131,9 @@ def test_compiled_verdicts_equal_the_numpy_reference():
         seen["keep"] += np.count_nonzero(~reference[0])
         seen["free"] += np.count_nonzero(scan.kind == FREE)
         seen["ignored"] += np.count_nonzero(scan.kind == IGNORED)
-        seen["impossible"] += np.count_nonzero((scan.kind == ECHO)
-                                               & (scan.ranges[:, 0] > scan.ranges[:, 1]))
+        seen["impossible"] += np.count_nonzero(
+            (scan.kind == ECHO) & (scan.ranges[:, 0] > scan.ranges[:, 1])
+        )
     assert seen["sensor_verdicts"] > 500_000
     assert min(seen.values()) > 0, seen
     assert seen["reject"] > 0.1 * seen["keep"], seen
@@ -134,16 +146,25 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
     for _ in range(20):
         belt, _ = _random_belt(rng)
         truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
-        boxes = np.ascontiguousarray(np.concatenate([_boxes_around(truth, rng, 20),
-                                                     _special_boxes(truth, rng)]))
+        boxes = np.ascontiguousarray(
+            np.concatenate([_boxes_around(truth, rng, 20), _special_boxes(truth, rng)])
+        )
         reference = _sensor_boxes(boxes, belt)
         cos_theta, sin_theta = _heading_trig(boxes)
         rows = np.empty((belt.count, sonar_kernel.SENSOR_COLUMNS))
         for n in range(boxes.shape[0]):
             sure = sonar_kernel._sensor_rows(
-                boxes[n], cos_theta[n], sin_theta[n], belt.kernel_table, belt.half_aperture_rad,
-                belt.sensor_box_margin_m, GUARD_M, _ARC_SLACK, _ANGLE_MARGIN_RAD,
-                TRIG_EXACT_LIMIT_RAD, rows,
+                boxes[n],
+                cos_theta[n],
+                sin_theta[n],
+                belt.kernel_table,
+                belt.half_aperture_rad,
+                belt.sensor_box_margin_m,
+                GUARD_M,
+                _ARC_SLACK,
+                _ANGLE_MARGIN_RAD,
+                TRIG_EXACT_LIMIT_RAD,
+                rows,
             )
             assert sure == reference.sure[n, 0]
             expected = np.column_stack(
@@ -162,9 +183,11 @@ def test_paving_and_tracking_agree_between_engines():
     hall = builtin_map("hall")
     belt = SonarBelt.from_params(PARAMS, echoes_never_lost=True)
     rng = np.random.default_rng(33)
-    trackers = {engine: IntervalTracker(TrackerSettings(0.5, 0.5, q_max=1, engine=engine),
-                                        hall.bounds) for engine in ENGINES}
-    previous = {engine: None for engine in ENGINES}
+    trackers = {
+        engine: IntervalTracker(TrackerSettings(0.5, 0.5, q_max=1, engine=engine), hall.bounds)
+        for engine in ENGINES
+    }
+    previous = dict.fromkeys(ENGINES)
     for truth in ([2.0, 6.0, 3.1], [5.0, 3.0, -3.1], [5.2, 3.1, -2.8]):
         truth = np.array(truth)
         readings = _readings(_distances(truth, hall.segments), PARAMS, rng)
@@ -186,8 +209,9 @@ def test_paving_and_tracking_agree_between_engines():
 
 
 def test_bad_engine_or_box_shape_is_refused():
-    scan = SonarScan(builtin_map("hall").segments, SonarBelt.from_params(PARAMS),
-                     np.full(PARAMS.count, 1.0))
+    scan = SonarScan(
+        builtin_map("hall").segments, SonarBelt.from_params(PARAMS), np.full(PARAMS.count, 1.0)
+    )
     box = np.array([[1.0, 2.0], [1.0, 2.0], [0.0, 0.1]])
     with pytest.raises(IntervalError, match="engine"):
         sensor_verdicts(box, scan, engine="fortran")

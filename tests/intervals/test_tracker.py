@@ -4,9 +4,9 @@ and what an epoch reports (boxes, inner mask, components, hull, status)."""
 import numpy as np
 import pytest
 
+from intervals.boxes import unwrap_headings
 from intervals.errors import IntervalError
 from intervals.sonar import SonarBelt, SonarScan
-from intervals.boxes import unwrap_headings
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
@@ -25,8 +25,9 @@ def _circuit(epochs: int) -> np.ndarray:
 
 
 def _scan(truth, rng, outliers=0):
-    d = cone_distances(truth, HALL.segments, PARAMS.mount_xy, PARAMS.mount_angle_rad,
-                       PARAMS.half_aperture_rad)
+    d = cone_distances(
+        truth, HALL.segments, PARAMS.mount_xy, PARAMS.mount_angle_rad, PARAMS.half_aperture_rad
+    )
     bound = PARAMS.error_abs_bound_m + PARAMS.error_rel_bound * np.where(np.isfinite(d), d, 0)
     m = np.maximum(d + rng.uniform(-1, 1, d.shape) * bound, 0.0)
     m = np.where(d > PARAMS.d_max_m, np.inf, m)
@@ -38,8 +39,9 @@ def _scan(truth, rng, outliers=0):
 
 
 def _tracker(kind, q_max=1, guaranteed=True):
-    settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=q_max, tracker=kind,
-                               guaranteed=guaranteed)
+    settings = TrackerSettings(
+        v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=q_max, tracker=kind, guaranteed=guaranteed
+    )
     return IntervalTracker(settings, HALL.bounds)
 
 
@@ -84,7 +86,9 @@ def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
     # every sensor sees a wall at 1 m: nowhere in the hall (checked globally below)
     absurd = SonarScan(HALL.segments, BELT, np.full(16, 1.0), HALL.boundary)
     bad = tracker.step(first.paving, absurd, 1.0)
-    assert not bad.consistent and bad.paving is None and bad.q is None and bad.status == "inconsistent"
+    assert (
+        not bad.consistent and bad.paving is None and bad.q is None and bad.status == "inconsistent"
+    )
     lost = tracker.step(bad.paving, absurd, 1.0)  # globally absurd too
     assert lost.status == "lost" and lost.paving is None
     again = tracker.step(lost.paving, _scan(truth, rng), 1.0)
@@ -105,7 +109,9 @@ def test_an_epoch_reports_its_boxes_components_and_hull():
     shift = 2 * np.pi * np.round((outer[:, 2].mean(axis=1) - hull[2].mean()) / (2 * np.pi))
     shifted = outer.copy()
     shifted[:, 2] -= shift[:, None]
-    assert np.all(hull[:, 0] <= shifted[..., 0] + 1e-12) and np.all(shifted[..., 1] <= hull[:, 1] + 1e-12)
+    assert np.all(hull[:, 0] <= shifted[..., 0] + 1e-12) and np.all(
+        shifted[..., 1] <= hull[:, 1] + 1e-12
+    )
     assert np.any(np.isclose(shifted[..., 0], hull[:, 0]), axis=0).all()
 
 

@@ -21,7 +21,14 @@ def unicycle(x, u, dt):
     dt = np.asarray(dt)[..., None] if np.ndim(dt) else dt
     v, w = u[..., 0:1], u[..., 1:2]
     theta = x[..., 2:3]
-    return np.concatenate([x[..., 0:1] + v * dt * np.cos(theta), x[..., 1:2] + v * dt * np.sin(theta), theta + w * dt], axis=-1)
+    return np.concatenate(
+        [
+            x[..., 0:1] + v * dt * np.cos(theta),
+            x[..., 1:2] + v * dt * np.sin(theta),
+            theta + w * dt,
+        ],
+        axis=-1,
+    )
 
 
 def unicycle_jacobian(x, u, dt):
@@ -55,20 +62,32 @@ def range_bearing_jacobian(x):
 
 PROCESS = ProcessModel(unicycle, np.diag([1e-3, 1e-3, 1e-3]), jacobian=unicycle_jacobian)
 AUGMENTED = ProcessModel(unicycle_with_noise, np.diag([0.05, 0.02]), noise="augmented")
-MEASUREMENT = MeasurementModel(range_bearing, np.diag([0.01, 0.003]), jacobian=range_bearing_jacobian, angle_indices=(1,))
+MEASUREMENT = MeasurementModel(
+    range_bearing, np.diag([0.01, 0.003]), jacobian=range_bearing_jacobian, angle_indices=(1,)
+)
 
 FILTERS = {
     "UKF": (UnscentedKalmanFilter(), PROCESS),
     "UKF augmented": (UnscentedKalmanFilter(), AUGMENTED),
     "EKF": (ExtendedKalmanFilter(), PROCESS),
-    "IEKF": (IteratedExtendedKalmanFilter(IterationSettings(max_iterations=8, tolerance=1e-6)), PROCESS),
-    "IUKF": (IteratedUnscentedKalmanFilter(iteration=IterationSettings(max_iterations=8, tolerance=1e-6)), PROCESS),
+    "IEKF": (
+        IteratedExtendedKalmanFilter(IterationSettings(max_iterations=8, tolerance=1e-6)),
+        PROCESS,
+    ),
+    "IUKF": (
+        IteratedUnscentedKalmanFilter(
+            iteration=IterationSettings(max_iterations=8, tolerance=1e-6)
+        ),
+        PROCESS,
+    ),
 }
 
 
 def inputs(seed):
     rng = np.random.default_rng(seed)
-    mean = np.column_stack([rng.normal(0, 1, B), rng.normal(0, 1, B), rng.uniform(-np.pi, np.pi, B)])
+    mean = np.column_stack(
+        [rng.normal(0, 1, B), rng.normal(0, 1, B), rng.uniform(-np.pi, np.pi, B)]
+    )
     mean[0, 2] = np.pi - 1e-3
     mean[1, 2] = -np.pi + 1e-3
     roots = rng.normal(0, 0.3, (B, 3, 3))
@@ -102,14 +121,24 @@ def test_modified_filters_batched_equal_looped():
     subsystem = LinearSubsystem(
         2,
         transition=lambda y: np.stack(
-            [np.stack([1 - 0.1 * y[..., 0], np.full_like(y[..., 0], 0.1)], -1), np.stack([np.full_like(y[..., 0], -0.1), np.ones_like(y[..., 0])], -1)],
+            [
+                np.stack([1 - 0.1 * y[..., 0], np.full_like(y[..., 0], 0.1)], -1),
+                np.stack([np.full_like(y[..., 0], -0.1), np.ones_like(y[..., 0])], -1),
+            ],
             -2,
         ),
         observation=lambda x, y: np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)),
     )
 
     def f(s):
-        return np.stack([(1 - 0.1 * s[..., 2]) * s[..., 0] + 0.1 * s[..., 1], -0.1 * s[..., 0] + s[..., 1], s[..., 2]], -1)
+        return np.stack(
+            [
+                (1 - 0.1 * s[..., 2]) * s[..., 0] + 0.1 * s[..., 1],
+                -0.1 * s[..., 0] + s[..., 1],
+                s[..., 2],
+            ],
+            -1,
+        )
 
     def f_jac(s):
         jac = np.zeros(s.shape[:-1] + (3, 3))
@@ -118,7 +147,11 @@ def test_modified_filters_batched_equal_looped():
         return jac
 
     process = ProcessModel(f, 1e-4 * np.eye(3), jacobian=f_jac)
-    measurement = MeasurementModel(lambda s: s[..., :1], np.array([[1e-3]]), jacobian=lambda s: np.broadcast_to(np.array([[1.0, 0, 0]]), s.shape[:-1] + (1, 3)))
+    measurement = MeasurementModel(
+        lambda s: s[..., :1],
+        np.array([[1e-3]]),
+        jacobian=lambda s: np.broadcast_to(np.array([[1.0, 0, 0]]), s.shape[:-1] + (1, 3)),
+    )
     rng = np.random.default_rng(4)
     mean = rng.normal(1.0, 0.2, (B, 3))
     zs = rng.normal(1.0, 0.2, (4, B, 1))
@@ -140,18 +173,28 @@ def heading_filter():
     process = ProcessModel(
         lambda x, dt: np.stack([x[..., 0] + dt * x[..., 1], x[..., 1]], axis=-1),
         np.diag([1e-4, 1e-3]),
-        jacobian=lambda x, dt: np.broadcast_to(np.array([[1.0, dt], [0.0, 1.0]]), x.shape[:-1] + (2, 2)),
+        jacobian=lambda x, dt: np.broadcast_to(
+            np.array([[1.0, dt], [0.0, 1.0]]), x.shape[:-1] + (2, 2)
+        ),
     )
     measurement = MeasurementModel(
-        lambda x: x[..., :1], np.array([[0.01]]),
-        jacobian=lambda x: np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)), angle_indices=(0,),
+        lambda x: x[..., :1],
+        np.array([[0.01]]),
+        jacobian=lambda x: np.broadcast_to(np.array([[1.0, 0.0]]), x.shape[:-1] + (1, 2)),
+        angle_indices=(0,),
     )
     return process, measurement
 
 
 @pytest.mark.parametrize(
     "kf",
-    [UnscentedKalmanFilter(), UnscentedKalmanFilter(KappaSigmaPoints()), ExtendedKalmanFilter(), IteratedExtendedKalmanFilter(), IteratedUnscentedKalmanFilter()],
+    [
+        UnscentedKalmanFilter(),
+        UnscentedKalmanFilter(KappaSigmaPoints()),
+        ExtendedKalmanFilter(),
+        IteratedExtendedKalmanFilter(),
+        IteratedUnscentedKalmanFilter(),
+    ],
     ids=["UKF", "UKF-kappa", "EKF", "IEKF", "IUKF"],
 )
 def test_heading_across_pi_equals_the_same_problem_away_from_it(kf):
@@ -163,8 +206,12 @@ def test_heading_across_pi_equals_the_same_problem_away_from_it(kf):
     shifted = Gaussian(np.array([np.pi - 0.3, 0.2]), np.diag([0.5, 0.1]), angle_indices=(0,))
     centred = Gaussian(np.array([-0.3, 0.2]), np.diag([0.5, 0.1]), angle_indices=(0,))
     for k in range(truth.size):
-        shifted = kf.update(kf.predict(shifted, process, 1.0), np.array([truth[k] + noise[k]]), measurement)
-        centred = kf.update(kf.predict(centred, process, 1.0), np.array([truth[k] - np.pi + noise[k]]), measurement)
+        shifted = kf.update(
+            kf.predict(shifted, process, 1.0), np.array([truth[k] + noise[k]]), measurement
+        )
+        centred = kf.update(
+            kf.predict(centred, process, 1.0), np.array([truth[k] - np.pi + noise[k]]), measurement
+        )
         diff = (shifted.mean[0] - centred.mean[0] - np.pi + np.pi) % (2 * np.pi) - np.pi
         assert abs(diff) < 1e-9
         assert -np.pi <= shifted.mean[0] < np.pi

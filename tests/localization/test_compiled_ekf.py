@@ -51,7 +51,9 @@ def takes_compiled_path(belief: Gaussian, model, *args) -> bool:
         done = compiled_ekf.predict(belief.mean, belief.cov, belief.angle_indices, model, args)
     else:
         z, *args = args
-        done = compiled_ekf.update(belief.mean, belief.cov, belief.angle_indices, z, model, tuple(args))
+        done = compiled_ekf.update(
+            belief.mean, belief.cov, belief.angle_indices, z, model, tuple(args)
+        )
     return done is not None
 
 
@@ -106,13 +108,19 @@ def test_predict_matches_numpy_path(name):
         assert np.abs(batched.mean[:, 2]).max() > 3.0, "headings near +-pi must be exercised"
         assert (batched.mean[:, 2] < math.pi).all() and (batched.mean[:, 2] >= -math.pi).all()
     assert_bitwise_runs(batched, lambda run: EKF.predict(belief[run], compiled, DT_S), (0, 1, 5))
-    assert_close(EKF.predict(belief[3], compiled, DT_S), EKF.predict(belief[3], numpy_twin(compiled), DT_S))
+    assert_close(
+        EKF.predict(belief[3], compiled, DT_S), EKF.predict(belief[3], numpy_twin(compiled), DT_S)
+    )
 
 
 @pytest.mark.parametrize("measurement", ["pose", "gps"])
 def test_update_matches_numpy_path(measurement):
     motion = MODELS["CTRV"]
-    compiled = pose_model(np.diag([0.3, 0.2, 0.05])) if measurement == "pose" else gps_model(np.diag([0.3, 0.2]))
+    compiled = (
+        pose_model(np.diag([0.3, 0.2, 0.05]))
+        if measurement == "pose"
+        else gps_model(np.diag([0.3, 0.2]))
+    )
     rng = np.random.default_rng(5)
     belief = random_belief(rng, motion.n, 24, motion.angle_indices)
     m = compiled.R.shape[0]
@@ -143,8 +151,12 @@ def test_a_filter_run_matches_the_numpy_filter(name):
     for _ in range(50):
         truth = motion.transition(truth, DT_S)
         z = truth[:3] + rng.normal(size=3) * [0.3, 0.3, 0.1]
-        beliefs = [EKF.update(EKF.predict(b, p, DT_S), z, mm) for b, p, mm in
-                   zip(beliefs, (process, numpy_twin(process)), (measurement, numpy_twin(measurement)))]
+        beliefs = [
+            EKF.update(EKF.predict(b, p, DT_S), z, mm)
+            for b, p, mm in zip(
+                beliefs, (process, numpy_twin(process)), (measurement, numpy_twin(measurement))
+            )
+        ]
     assert_close(*beliefs)
 
 
@@ -159,7 +171,8 @@ def test_per_run_arguments_and_noise():
     predicted = EKF.predict(belief, compiled, dt)
     assert_close(predicted, EKF.predict(belief, numpy_twin(compiled), dt))
     np.testing.assert_array_equal(
-        predicted.mean[4], EKF.predict(belief[4:5], motion.process_model(q_cov[4:5]), dt[4:5]).mean[0]
+        predicted.mean[4],
+        EKF.predict(belief[4:5], motion.process_model(q_cov[4:5]), dt[4:5]).mean[0],
     )
 
 
@@ -184,7 +197,9 @@ def test_non_finite_inputs_fall_back_with_the_numpy_errors():
     broken = Gaussian.trusted(mean, np.array(belief.cov), belief.angle_indices)
     assert not takes_compiled_path(broken, compiled, DT_S)
     for model in (compiled, numpy_twin(compiled)):
-        with pytest.raises(EstimationError, match="EKF predict: the predicted mean .* is not finite"):
+        with pytest.raises(
+            EstimationError, match="EKF predict: the predicted mean .* is not finite"
+        ):
             EKF.predict(broken, model, DT_S)
     z = np.zeros((3, 3))
     z[1, 0] = math.inf
@@ -209,7 +224,9 @@ def test_non_positive_definite_covariances():
     indefinite = Gaussian(belief.mean, cov, belief.angle_indices)
     compiled = additive_model(motion)
     assert takes_compiled_path(indefinite, compiled, DT_S)
-    assert_close(EKF.predict(indefinite, compiled, DT_S), EKF.predict(indefinite, numpy_twin(compiled), DT_S))
+    assert_close(
+        EKF.predict(indefinite, compiled, DT_S), EKF.predict(indefinite, numpy_twin(compiled), DT_S)
+    )
     cov[1] = np.diag([1.0, 1.0, -1.0, 1.0, 1.0])  # S = P[:3, :3] + R has a negative pivot
     measurement = pose_model(0.01 * np.eye(3))
     broken = Gaussian(belief.mean, cov, belief.angle_indices)
@@ -245,12 +262,22 @@ def damped_jacobian(x, k, dt_s):
 
 
 def test_user_kernels_are_compiled_once_and_match():
-    compiled = ProcessModel(damped, 0.01 * np.eye(3), jacobian=damped_jacobian, point=damped_point,
-                            jacobian_point=damped_jacobian_point)
-    belief = Gaussian(np.array([[0.5, -1.0, 2.0], [0.1, 0.2, 0.3]]), np.broadcast_to(0.2 * np.eye(3), (2, 3, 3)))
+    compiled = ProcessModel(
+        damped,
+        0.01 * np.eye(3),
+        jacobian=damped_jacobian,
+        point=damped_point,
+        jacobian_point=damped_jacobian_point,
+    )
+    belief = Gaussian(
+        np.array([[0.5, -1.0, 2.0], [0.1, 0.2, 0.3]]), np.broadcast_to(0.2 * np.eye(3), (2, 3, 3))
+    )
     rates = np.array([0.5, 2.0])  # per run
     assert takes_compiled_path(belief, compiled, rates, DT_S)
-    assert_close(EKF.predict(belief, compiled, rates, DT_S), EKF.predict(belief, numpy_twin(compiled), rates, DT_S))
+    assert_close(
+        EKF.predict(belief, compiled, rates, DT_S),
+        EKF.predict(belief, numpy_twin(compiled), rates, DT_S),
+    )
     entry = compiled_ekf.predict_entry(damped_point, damped_jacobian_point)
     assert compiled_ekf.predict_entry(damped_point, damped_jacobian_point) is entry
 
@@ -260,11 +287,20 @@ def test_kernels_that_do_not_fit_give_one_clear_error():
     def two_arguments(x, out):
         out[:] = 0.0
 
-    model = ProcessModel(lambda x, dt_s: x, np.eye(2), jacobian=lambda x, dt_s: np.eye(2), point=damped_point,
-                         jacobian_point=two_arguments)
-    with pytest.raises(EstimationError, match="EKF predict: the kernel damped_point and two_arguments does not"):
+    model = ProcessModel(
+        lambda x, dt_s: x,
+        np.eye(2),
+        jacobian=lambda x, dt_s: np.eye(2),
+        point=damped_point,
+        jacobian_point=two_arguments,
+    )
+    with pytest.raises(
+        EstimationError, match="EKF predict: the kernel damped_point and two_arguments does not"
+    ):
         EKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, 0.5, DT_S)
-    with pytest.raises(EstimationError, match="jacobian_point must be a numba.njit-compiled function"):
+    with pytest.raises(
+        EstimationError, match="jacobian_point must be a numba.njit-compiled function"
+    ):
         MeasurementModel(lambda x: x, np.eye(2), jacobian_point=lambda x, args, out: None)
 
 
@@ -275,7 +311,8 @@ def test_steps_the_compiled_path_cannot_take_use_the_numpy_path():
     belief = random_belief(np.random.default_rng(9), motion.n, 4, ())
     grid = Gaussian(belief.mean.reshape(2, 2, 4), belief.cov.reshape(2, 2, 4, 4))
     assert not takes_compiled_path(grid, compiled, DT_S)
-    np.testing.assert_array_equal(EKF.predict(grid, compiled, DT_S).mean,
-                                  EKF.predict(grid, numpy_twin(compiled), DT_S).mean)
+    np.testing.assert_array_equal(
+        EKF.predict(grid, compiled, DT_S).mean, EKF.predict(grid, numpy_twin(compiled), DT_S).mean
+    )
     with pytest.raises(EstimationError, match="EKF predict: the model has no jacobian"):
         EKF.predict(belief, dataclasses.replace(compiled, jacobian=None), DT_S)

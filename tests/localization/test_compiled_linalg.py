@@ -24,7 +24,9 @@ def test_cholesky_and_solve_match_numpy(n):
     for _ in range(50):
         root = rng.normal(size=(n, n))
         matrix = root @ root.T + 1e-3 * np.eye(n)
-        factor = np.full((n, n), np.nan)  # the kernel must overwrite every entry, upper part included
+        factor = np.full(
+            (n, n), np.nan
+        )  # the kernel must overwrite every entry, upper part included
         assert cholesky_lower(matrix, factor)
         np.testing.assert_allclose(factor, np.linalg.cholesky(matrix), rtol=1e-10, atol=1e-12)
         rhs = rng.normal(size=(n, 3))
@@ -60,10 +62,20 @@ def test_cholesky_refuses_what_lapack_refuses(matrix):
 
 def test_wrapping_matches_the_numpy_functions():
     rng = np.random.default_rng(1)
-    angles = np.concatenate([
-        rng.uniform(-50.0, 50.0, 2000),
-        [-math.pi, math.pi, np.nextafter(-math.pi, -4.0), np.nextafter(math.pi, 4.0), 0.0, 3 * math.pi, -3 * math.pi],
-    ])
+    angles = np.concatenate(
+        [
+            rng.uniform(-50.0, 50.0, 2000),
+            [
+                -math.pi,
+                math.pi,
+                np.nextafter(-math.pi, -4.0),
+                np.nextafter(math.pi, 4.0),
+                0.0,
+                3 * math.pi,
+                -3 * math.pi,
+            ],
+        ]
+    )
     wrapped = np.array([wrap_angle(a) for a in angles])
     np.testing.assert_array_equal(wrapped, linalg.wrap_angle(angles))
     assert wrapped.min() >= -math.pi and wrapped.max() < math.pi
@@ -87,11 +99,23 @@ def test_kalman_gain_matches_the_textbook_gain(n, m):
         cov = root @ root.T + 1e-2 * np.eye(n)
         jac = rng.normal(size=(m, n))
         noise = np.diag(rng.uniform(0.01, 1.0, m))
-        cross, s_cov, s_chol, gain_t = np.empty((n, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, n))
+        cross, s_cov, s_chol, gain_t = (
+            np.empty((n, m)),
+            np.empty((m, m)),
+            np.empty((m, m)),
+            np.empty((m, n)),
+        )
         assert kalman_gain_t(cov, jac, noise, cross, s_cov, s_chol, gain_t)
         expected = cov @ jac.T @ np.linalg.inv(jac @ cov @ jac.T + noise)
         np.testing.assert_allclose(gain_t.T, expected, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(s_cov, jac @ cov @ jac.T + noise, rtol=1e-12)
     # S not positive definite (a negative noise variance larger than H P H^T): refused
-    assert not kalman_gain_t(np.eye(2), np.eye(2), -2.0 * np.eye(2), np.empty((2, 2)), np.empty((2, 2)),
-                             np.empty((2, 2)), np.empty((2, 2)))
+    assert not kalman_gain_t(
+        np.eye(2),
+        np.eye(2),
+        -2.0 * np.eye(2),
+        np.empty((2, 2)),
+        np.empty((2, 2)),
+        np.empty((2, 2)),
+        np.empty((2, 2)),
+    )

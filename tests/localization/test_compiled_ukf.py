@@ -45,7 +45,9 @@ def random_belief(rng: np.random.Generator, n: int, runs: int, angles: tuple[int
     mean[:, 3] = rng.uniform(0.5, 10.0, runs)  # a speed (CV: vx) well away from 0
     mean[::3, -1] *= 1e-9  # omega, c or vy near 0: the series branches
     for a in angles:
-        mean[:, a] = np.where(rng.random(runs) < 0.5, math.pi, -math.pi) - rng.uniform(-0.05, 0.05, runs)
+        mean[:, a] = np.where(rng.random(runs) < 0.5, math.pi, -math.pi) - rng.uniform(
+            -0.05, 0.05, runs
+        )
     root = rng.normal(size=(runs, n, n)) * 0.2
     cov = root @ root.mT + 0.05 * np.eye(n)
     if angles:
@@ -57,19 +59,32 @@ def compiled_step_runs(belief: Gaussian, model, *args) -> bool:
     """Whether the compiled path takes this step itself (no fallback to the numpy path)."""
     if isinstance(model, ProcessModel):
         dim = belief.dim + (model.Q.shape[-1] if model.noise == "augmented" else 0)
-        done = compiled_ukf.predict(UKF.points.weights(dim), belief.mean, belief.cov, belief.angle_indices, model, args)
+        done = compiled_ukf.predict(
+            UKF.points.weights(dim), belief.mean, belief.cov, belief.angle_indices, model, args
+        )
     else:
         z, *args = args
-        done = compiled_ukf.update(UKF.points.weights(belief.dim), belief.mean, belief.cov, belief.angle_indices, z,
-                                   model, tuple(args))
+        done = compiled_ukf.update(
+            UKF.points.weights(belief.dim),
+            belief.mean,
+            belief.cov,
+            belief.angle_indices,
+            z,
+            model,
+            tuple(args),
+        )
     return done is not None
 
 
-def assert_close(ours: Gaussian, reference: Gaussian, atol: float = 0.0, rtol: float = RTOL) -> None:
+def assert_close(
+    ours: Gaussian, reference: Gaussian, atol: float = 0.0, rtol: float = RTOL
+) -> None:
     residual = reference.residual(ours.mean)  # angles wrapped: +pi and -pi are the same heading
     scale = np.abs(reference.mean).max() + 1.0
     np.testing.assert_allclose(residual, 0.0, atol=atol + rtol * scale)
-    np.testing.assert_allclose(ours.cov, reference.cov, atol=atol + rtol * np.abs(reference.cov).max(), rtol=0)
+    np.testing.assert_allclose(
+        ours.cov, reference.cov, atol=atol + rtol * np.abs(reference.cov).max(), rtol=0
+    )
 
 
 def process_models(motion, noise: str) -> ProcessModel:
@@ -102,7 +117,11 @@ def test_predict_matches_numpy_path(name, noise):
 @pytest.mark.parametrize("measurement", ["pose", "gps"])
 def test_update_matches_numpy_path(measurement):
     motion = MODELS["CTRV"]
-    compiled = pose_model(np.diag([0.3, 0.2, 0.05])) if measurement == "pose" else gps_model(np.diag([0.3, 0.2]))
+    compiled = (
+        pose_model(np.diag([0.3, 0.2, 0.05]))
+        if measurement == "pose"
+        else gps_model(np.diag([0.3, 0.2]))
+    )
     reference = numpy_twin(compiled)
     rng = np.random.default_rng(5)
     belief = random_belief(rng, motion.n, 24, motion.angle_indices)
@@ -129,7 +148,11 @@ def test_tiny_alpha_within_the_finite_difference_rounding():
     gamma2 = ukf.points.weights(motion.n).gamma ** 2
     scale = np.abs(belief.mean).max() + 10.0
     predicted = ukf.predict(belief, compiled, DT_S)
-    assert_close(predicted, ukf.predict(belief, numpy_twin(compiled), DT_S), atol=50 * np.finfo(float).eps * scale / gamma2)
+    assert_close(
+        predicted,
+        ukf.predict(belief, numpy_twin(compiled), DT_S),
+        atol=50 * np.finfo(float).eps * scale / gamma2,
+    )
 
 
 def test_per_run_arguments_and_noise():
@@ -143,7 +166,10 @@ def test_per_run_arguments_and_noise():
     assert compiled_step_runs(belief, compiled, dt)
     predicted = UKF.predict(belief, compiled, dt)
     assert_close(predicted, UKF.predict(belief, numpy_twin(compiled), dt))
-    np.testing.assert_array_equal(predicted.mean[4], UKF.predict(belief[4:5], motion.process_model(q_cov[4:5]), dt[4:5]).mean[0])
+    np.testing.assert_array_equal(
+        predicted.mean[4],
+        UKF.predict(belief[4:5], motion.process_model(q_cov[4:5]), dt[4:5]).mean[0],
+    )
 
 
 def test_non_positive_definite_falls_back_to_the_policy():
@@ -173,7 +199,9 @@ def test_non_positive_definite_falls_back_to_the_policy():
     np.testing.assert_array_equal(results[0].cov, results[1].cov)
     measurement = pose_model(np.eye(3))
     z = np.zeros((6, 3))
-    with pytest.raises(EstimationError, match="UKF update: the covariance is not positive definite"):
+    with pytest.raises(
+        EstimationError, match="UKF update: the covariance is not positive definite"
+    ):
         UKF.update(broken, z, measurement)
 
 
@@ -207,12 +235,16 @@ def damped(x, k, dt_s):
 
 def test_user_kernel_is_compiled_once_and_matches():
     compiled = ProcessModel(damped, 0.01 * np.eye(3), point=damped_point)
-    belief = Gaussian(np.array([[0.5, -1.0, 2.0], [0.1, 0.2, 0.3]]), np.broadcast_to(0.2 * np.eye(3), (2, 3, 3)))
+    belief = Gaussian(
+        np.array([[0.5, -1.0, 2.0], [0.1, 0.2, 0.3]]), np.broadcast_to(0.2 * np.eye(3), (2, 3, 3))
+    )
     rates = np.array([0.5, 2.0])  # per run
     assert compiled_step_runs(belief, compiled, rates, DT_S)
     predicted = UKF.predict(belief, compiled, rates, DT_S)
     assert_close(predicted, UKF.predict(belief, numpy_twin(compiled), rates, DT_S))
-    assert compiled_ukf.predict_entry(damped_point, False) is compiled_ukf.predict_entry(damped_point, False)
+    assert compiled_ukf.predict_entry(damped_point, False) is compiled_ukf.predict_entry(
+        damped_point, False
+    )
 
 
 def test_kernel_that_does_not_fit_gives_one_clear_error():
@@ -221,7 +253,9 @@ def test_kernel_that_does_not_fit_gives_one_clear_error():
         out[:] = x
 
     model = ProcessModel(lambda x, dt_s: x, np.eye(2), point=two_arguments)
-    with pytest.raises(EstimationError, match="UKF predict: the kernel two_arguments does not compile"):
+    with pytest.raises(
+        EstimationError, match="UKF predict: the kernel two_arguments does not compile"
+    ):
         UKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, DT_S)
     with pytest.raises(EstimationError, match="point must be a numba.njit-compiled function"):
         MeasurementModel(lambda x: x, np.eye(2), point=lambda x, args, out: None)
@@ -238,4 +272,7 @@ def test_steps_the_compiled_path_cannot_take_use_the_numpy_path():
         two_axes = UKF.predict(grid, compiled, DT_S)
     np.testing.assert_array_equal(two_axes.mean, UKF.predict(grid, numpy_twin(compiled), DT_S).mean)
     assert compiled_ukf.pack_args(("dt",), ()) is None
-    assert compiled_ukf.predict(UKF.points.weights(4), grid.mean, grid.cov, (), compiled, (DT_S,)) is None
+    assert (
+        compiled_ukf.predict(UKF.points.weights(4), grid.mean, grid.cov, (), compiled, (DT_S,))
+        is None
+    )

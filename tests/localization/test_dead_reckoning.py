@@ -46,7 +46,14 @@ def nominal(robot: RobotParams) -> NominalRobot:
 
 
 def data_of(log, noise=DeadReckoningNoise()):
-    return odometry_data(log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal(log.robot), noise)
+    return odometry_data(
+        log.wheel_ticks,
+        log.gyro_rad_s,
+        log.accel_m_s2,
+        1.0 / log.rate_hz,
+        nominal(log.robot),
+        noise,
+    )
 
 
 def wrap(angle):
@@ -56,7 +63,8 @@ def wrap(angle):
 @pytest.fixture(scope="module")
 def route_logs():
     return [
-        simulate(HALL, ROUTE, start_pose=START, duration_s=30.0, rng=np.random.default_rng(seed)) for seed in range(4)
+        simulate(HALL, ROUTE, start_pose=START, duration_s=30.0, rng=np.random.default_rng(seed))
+        for seed in range(4)
     ]
 
 
@@ -68,8 +76,15 @@ def ideal_run(v_m_s, omega_rad_s, duration_s=8.0):
     sensors = SensorSuite(
         gyro=GyroParams(tiny, tiny, tiny), accelerometer=AccelerometerParams(tiny, tiny, tiny)
     )
-    return simulate(HALL, ScriptedProfile([0.0], [v_m_s], [omega_rad_s]), start_pose=(2.0, 4.0, 0.3),
-                    duration_s=duration_s, rng=np.random.default_rng(7), robot=robot, sensors=sensors)
+    return simulate(
+        HALL,
+        ScriptedProfile([0.0], [v_m_s], [omega_rad_s]),
+        start_pose=(2.0, 4.0, 0.3),
+        duration_s=duration_s,
+        rng=np.random.default_rng(7),
+        robot=robot,
+        sensors=sensors,
+    )
 
 
 def test_straight_line_follows_the_closed_form():
@@ -78,8 +93,12 @@ def test_straight_line_follows_the_closed_form():
     t = log.t_s
     ramp_s = 0.4 / log.robot.a_max_m_s2  # speed ramps up at a_max, then holds
     distance = np.where(t < ramp_s, 0.5 * log.robot.a_max_m_s2 * t**2, 0.4 * t - 0.5 * 0.4 * ramp_s)
-    along = (history.mean[:, 0, 0] - 2.0) * math.cos(0.3) + (history.mean[:, 0, 1] - 4.0) * math.sin(0.3)
-    across = -(history.mean[:, 0, 0] - 2.0) * math.sin(0.3) + (history.mean[:, 0, 1] - 4.0) * math.cos(0.3)
+    along = (history.mean[:, 0, 0] - 2.0) * math.cos(0.3) + (
+        history.mean[:, 0, 1] - 4.0
+    ) * math.sin(0.3)
+    across = -(history.mean[:, 0, 0] - 2.0) * math.sin(0.3) + (
+        history.mean[:, 0, 1] - 4.0
+    ) * math.cos(0.3)
     assert np.abs(along - distance).max() < 0.01  # metres over 3 m
     assert np.abs(across).max() < 0.005
     assert np.abs(history.mean[:, 0, THETA] - 0.3).max() < 2e-3
@@ -100,17 +119,26 @@ def test_pure_rotation_follows_the_closed_form():
 
 def truth_states(log):
     robot = log.robot
-    d_wheel = (robot.true_wheel_radius_right_m - robot.true_wheel_radius_left_m) / robot.wheel_radius_m
-    return np.column_stack([
-        log.pose, log.velocity, log.gyro_bias_rad_s, log.accel_bias_m_s2[:, 0], np.full(len(log.t_s), d_wheel)
-    ])
+    d_wheel = (
+        robot.true_wheel_radius_right_m - robot.true_wheel_radius_left_m
+    ) / robot.wheel_radius_m
+    return np.column_stack(
+        [
+            log.pose,
+            log.velocity,
+            log.gyro_bias_rad_s,
+            log.accel_bias_m_s2[:, 0],
+            np.full(len(log.t_s), d_wheel),
+        ]
+    )
 
 
 def test_tracks_the_truth_with_a_drift_that_grows_with_time_and_a_consistent_covariance(route_logs):
     pose_nees, full_nees = [], []
     for log in route_logs:
-        history = run_dead_reckoning(data_of(log), initial_belief(START, [0.01, 0.01, 0.01], batch=1),
-                                     record_full_cov=True)
+        history = run_dead_reckoning(
+            data_of(log), initial_belief(START, [0.01, 0.01, 0.01], batch=1), record_full_cov=True
+        )
         error = history.mean[:, 0] - truth_states(log)
         error[:, THETA] = wrap(error[:, THETA])
         t = log.t_s
@@ -118,7 +146,9 @@ def test_tracks_the_truth_with_a_drift_that_grows_with_time_and_a_consistent_cov
         assert (np.abs(error[:, THETA]) < 0.02 + 0.006 * t).all()
         samples = np.arange(100, len(t), 100)  # once a second
         e, cov = error[samples], history.cov[samples, 0]
-        pose_nees.append(np.einsum("ti,tij,tj->t", e[:, :3], np.linalg.inv(cov[:, :3, :3]), e[:, :3]))
+        pose_nees.append(
+            np.einsum("ti,tij,tj->t", e[:, :3], np.linalg.inv(cov[:, :3, :3]), e[:, :3])
+        )
         full_nees.append(np.einsum("ti,tij,tj->t", e, np.linalg.inv(cov), e))
     # averages over 4 runs x 29 epochs; time-correlated samples, hence a generous band
     assert 0.3 * 3 < np.mean(pose_nees) < 2.5 * 3
@@ -130,9 +160,12 @@ def test_wheel_radius_difference_and_biases_are_learned(seed):
     # two circles (different speeds, same yaw rate) with stops: the gyro bias, the wheel
     # radius difference (scales with the speed) and the accelerometer bias separate
     profile = ScriptedProfile([0.0, 12.6, 14.6, 20.6], [0.4, 0.0, 0.2, 0.0], [0.5, 0.0, 0.5, 0.0])
-    log = simulate(HALL, profile, start_pose=(4.0, 3.5, 0.0), duration_s=23.0, rng=np.random.default_rng(seed))
-    history = run_dead_reckoning(data_of(log), initial_belief(log.pose[0], [0.01] * 3, batch=1),
-                                 record_full_cov=True)
+    log = simulate(
+        HALL, profile, start_pose=(4.0, 3.5, 0.0), duration_s=23.0, rng=np.random.default_rng(seed)
+    )
+    history = run_dead_reckoning(
+        data_of(log), initial_belief(log.pose[0], [0.01] * 3, batch=1), record_full_cov=True
+    )
     truth = truth_states(log)[-1]
     std = np.sqrt(np.diagonal(history.cov[-1, 0]))
     prior = np.sqrt(np.diagonal(initial_belief(START, [0.01] * 3, batch=None).cov))
@@ -152,14 +185,21 @@ def test_compiled_step_equals_c_filters(route_logs, name):
     start = initial_belief(START, [0.05, 0.03, 0.02])
     rng = np.random.default_rng(3)
     mixing = rng.standard_normal((2, N_STATES, N_STATES)) * 0.02
-    initial = Gaussian(start.mean + [[0.0] * 3 + [0.2, 0.1, 0.0, 0.0, 0.0]] * 2,
-                       start.cov + mixing @ mixing.mT, ANGLE_INDICES)
+    initial = Gaussian(
+        start.mean + [[0.0] * 3 + [0.2, 0.1, 0.0, 0.0, 0.0]] * 2,
+        start.cov + mixing @ mixing.mT,
+        ANGLE_INDICES,
+    )
     results = {}
     for engine in ("compiled", "generic"):
-        runner = DeadReckoning(data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True)
+        runner = DeadReckoning(
+            data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True
+        )
         runner.run(150)
         nudged = runner.belief
-        runner.replace(Gaussian(nudged.mean + [0.1, -0.1, 0.05, 0, 0, 0, 0, 0], nudged.cov, ANGLE_INDICES))
+        runner.replace(
+            Gaussian(nudged.mean + [0.1, -0.1, 0.05, 0, 0, 0, 0, 0], nudged.cov, ANGLE_INDICES)
+        )
         runner.run(steps - 1)
         results[engine] = runner.history
     assert_same_history(results["compiled"], results["generic"], 1e-8, 1e-9)
@@ -173,10 +213,14 @@ def assert_same_history(compiled, generic, mean_atol, cov_rtol):
     difference[..., THETA] = wrap(difference[..., THETA])
     assert np.abs(difference).max() < mean_atol
     std = np.sqrt(np.diagonal(generic.cov, axis1=-2, axis2=-1))
-    assert (np.abs(compiled.cov - generic.cov) / (std[..., :, None] * std[..., None, :])).max() < cov_rtol
+    assert (
+        np.abs(compiled.cov - generic.cov) / (std[..., :, None] * std[..., None, :])
+    ).max() < cov_rtol
 
 
-@pytest.mark.parametrize("name, tolerance", [("ukf", 1e-8), ("ekf", 1e-11)])  # ~3e-9 and ~1e-13 seen
+@pytest.mark.parametrize(
+    "name, tolerance", [("ukf", 1e-8), ("ekf", 1e-11)]
+)  # ~3e-9 and ~1e-13 seen
 def test_compiled_step_equals_c_filters_across_the_heading_wrap(route_logs, name, tolerance):
     # headings start at the edges of [-pi, pi) and turn across them; the data are shared by
     # the batch (the other comparison uses per-run data)
@@ -188,12 +232,16 @@ def test_compiled_step_equals_c_filters_across_the_heading_wrap(route_logs, name
     initial = Gaussian(mean, start.cov, ANGLE_INDICES)
     histories = {}
     for engine in ("compiled", "generic"):
-        runner = DeadReckoning(data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True)
+        runner = DeadReckoning(
+            data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True
+        )
         runner.run(200)
         histories[engine] = runner.history
     heading = histories["compiled"].mean[..., THETA]
     assert ((heading >= -math.pi) & (heading < math.pi)).all()
-    assert (np.abs(heading) > 3.0).all() and (heading > 0).any() and (heading < 0).any()  # both sides, near pi
+    assert (
+        (np.abs(heading) > 3.0).all() and (heading > 0).any() and (heading < 0).any()
+    )  # both sides, near pi
     assert_same_history(histories["compiled"], histories["generic"], tolerance, tolerance)
 
 
@@ -204,12 +252,16 @@ def test_iterated_filters_equal_their_plain_ones_on_the_linear_measurement(route
     pairs = [("ekf", "iekf", None), ("ukf", "iukf", points)]
     for plain, iterated, scheme in pairs:
         histories = [
-            DeadReckoning(data, initial, DeadReckoningSettings(filter=f, points=scheme, engine="generic"))
+            DeadReckoning(
+                data, initial, DeadReckoningSettings(filter=f, points=scheme, engine="generic")
+            )
             for f in (plain, iterated)
         ]
         for runner in histories:
             runner.run(100)
-        assert np.allclose(histories[0].history.mean, histories[1].history.mean, rtol=0.0, atol=1e-12)
+        assert np.allclose(
+            histories[0].history.mean, histories[1].history.mean, rtol=0.0, atol=1e-12
+        )
         cov, other = histories[0].history.cov, histories[1].history.cov
         std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))  # rounding, relative to the scale
         assert (np.abs(cov - other) / (std[..., :, None] * std[..., None, :])).max() < 1e-10
@@ -221,7 +273,8 @@ def test_batched_runs_equal_looped_runs(route_logs):
     gyro = np.stack([log.gyro_rad_s for log in logs], axis=1)
     accel = np.stack([log.accel_m_s2 for log in logs], axis=1)
     batched = run_dead_reckoning(
-        odometry_data(ticks, gyro, accel, 0.01, nominal(logs[0].robot)), initial_belief(START, [0.01] * 3, batch=3)
+        odometry_data(ticks, gyro, accel, 0.01, nominal(logs[0].robot)),
+        initial_belief(START, [0.01] * 3, batch=3),
     )
     for i, log in enumerate(logs):
         alone = run_dead_reckoning(data_of(log), initial_belief(START, [0.01] * 3, batch=1))
@@ -245,7 +298,9 @@ def test_epoch_callback_replaces_the_fused_row_only(route_logs):
         mean[1, :2] = 0.0
         return Gaussian(mean, belief.cov, ANGLE_INDICES)
 
-    history = run_dead_reckoning(data, initial_belief(START, [0.01] * 3), epochs=[100, 200], on_epoch=pull_to_origin)
+    history = run_dead_reckoning(
+        data, initial_belief(START, [0.01] * 3), epochs=[100, 200], on_epoch=pull_to_origin
+    )
     assert seen == [100, 200]
     assert np.array_equal(history.mean[200, 1, :2], [0.0, 0.0])
     assert np.abs(history.mean[200, 0, :2]).min() > 0.5  # the UKF-only branch was left alone
@@ -261,7 +316,9 @@ def test_transition_jacobian_matches_finite_differences():
     for j in range(N_STATES):
         bump = np.zeros(N_STATES)
         bump[j] = step
-        column = (transition(state + bump, accel, 0.01) - transition(state - bump, accel, 0.01)) / (2 * step)
+        column = (transition(state + bump, accel, 0.01) - transition(state - bump, accel, 0.01)) / (
+            2 * step
+        )
         assert np.allclose(jac[..., j], column, atol=1e-8)
 
 
@@ -291,7 +348,10 @@ def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
 def test_wide_heading_uncertainty_compiled_equals_generic_or_is_refused(route_logs):
     data = data_of(route_logs[0])
     wide = initial_belief(START, [0.01, 0.01, 2.5])  # kappa points reach 4.3 rad from the mean
-    runs = [DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e)) for e in ("compiled", "generic")]
+    runs = [
+        DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e))
+        for e in ("compiled", "generic")
+    ]
     for runner in runs:
         runner.run(50)
     assert np.abs(runs[0].history.mean - runs[1].history.mean).max() < 1e-12
@@ -302,14 +362,20 @@ def test_wide_heading_uncertainty_compiled_equals_generic_or_is_refused(route_lo
 
 
 @pytest.mark.parametrize("name", ["ukf", "iukf", "ekf", "iekf"])
-def test_a_covariance_that_is_not_positive_definite_is_refused_and_the_belief_kept(route_logs, name):
+def test_a_covariance_that_is_not_positive_definite_is_refused_and_the_belief_kept(
+    route_logs, name
+):
     data = data_of(route_logs[0])
-    runner = DeadReckoning(data, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name))
+    runner = DeadReckoning(
+        data, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)
+    )
     belief = runner.run(30)
     cov = np.array(belief.cov)
     cov[:, 3, 3] = -1.0  # a negative speed variance: the unscented prediction cannot factorise
     runner.replace(Gaussian(belief.mean, cov, ANGLE_INDICES))  # it, nor the update S = H P H^T + R
-    with pytest.raises(EstimationError, match="at sample 31 the covariance is not positive definite"):
+    with pytest.raises(
+        EstimationError, match="at sample 31 the covariance is not positive definite"
+    ):
         runner.run(60)
     assert runner.index == 30 and np.array_equal(runner.belief.cov, cov)  # left where it was
 
@@ -321,7 +387,9 @@ def test_a_mean_that_is_not_finite_is_refused_naming_the_sample(route_logs, name
     accel[40] = np.nan  # past odometry_data's checks: OdometryData built by hand
     broken = dataclasses.replace(data, accel_input_m_s2=accel)
     with pytest.raises(EstimationError, match="at sample 40 .* the mean not finite"):
-        DeadReckoning(broken, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)).run(60)
+        DeadReckoning(
+            broken, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)
+        ).run(60)
 
 
 # --------------------------------------------------------------------------- long runs
@@ -342,15 +410,24 @@ def long_hall_runs():
     logs = [simulate_spec(spec.with_run(seed=seed)) for seed in LONG_SEEDS]
     noise = dead_reckoning_noise(spec)  # the pipeline's model: the declared sensor figures
     data = odometry_data(
-        np.stack([log.wheel_ticks for log in logs], axis=1), np.stack([log.gyro_rad_s for log in logs], axis=1),
-        np.stack([log.accel_m_s2 for log in logs], axis=1), 1.0 / logs[0].rate_hz, nominal(logs[0].robot), noise,
+        np.stack([log.wheel_ticks for log in logs], axis=1),
+        np.stack([log.gyro_rad_s for log in logs], axis=1),
+        np.stack([log.accel_m_s2 for log in logs], axis=1),
+        1.0 / logs[0].rate_hz,
+        nominal(logs[0].robot),
+        noise,
     )
-    history = run_dead_reckoning(data, initial_belief(spec.start_pose, START_POSE_STD, noise, batch=len(logs)),
-                                 record_full_cov=True)
+    history = run_dead_reckoning(
+        data,
+        initial_belief(spec.start_pose, START_POSE_STD, noise, batch=len(logs)),
+        record_full_cov=True,
+    )
     return spec, logs, noise, history
 
 
-def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_raw_gyro(long_hall_runs):
+def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_raw_gyro(
+    long_hall_runs,
+):
     spec, logs, noise, history = long_hall_runs
     gyro = logs[0].sensors.gyro
     for b, log in enumerate(logs):
@@ -360,12 +437,18 @@ def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_r
         # 3 sigma of the integrated gyro errors the datasheet declares: turn-on bias times t,
         # the bias random walk integrated (variance rw^2 t^3 / 3), the white noise (density^2 t),
         # and the start heading's std
-        variance = ((gyro.turn_on_bias_std_rad_s * t) ** 2 + gyro.bias_random_walk_rad_s_sqrt_s**2 * t**3 / 3.0
-                    + gyro.noise_density_rad_s_sqrt_hz**2 * t + START_POSE_STD[2] ** 2)
+        variance = (
+            (gyro.turn_on_bias_std_rad_s * t) ** 2
+            + gyro.bias_random_walk_rad_s_sqrt_s**2 * t**3 / 3.0
+            + gyro.noise_density_rad_s_sqrt_hz**2 * t
+            + START_POSE_STD[2] ** 2
+        )
         declared = 3.0 * np.sqrt(variance)
         assert (np.abs(error) <= declared).all(), f"seed {LONG_SEEDS[b]}"
         rmse, raw_rmse = np.sqrt(np.mean(error**2)), np.sqrt(np.mean(raw**2))
-        assert rmse <= raw_rmse + 0.05, f"seed {LONG_SEEDS[b]}: heading RMSE {rmse:.3f} rad, raw gyro {raw_rmse:.3f}"
+        assert rmse <= raw_rmse + 0.05, (
+            f"seed {LONG_SEEDS[b]}: heading RMSE {rmse:.3f} rad, raw gyro {raw_rmse:.3f}"
+        )
 
 
 def test_long_run_gyro_bias_estimate_stays_near_the_truth(long_hall_runs):
@@ -377,4 +460,6 @@ def test_long_run_gyro_bias_estimate_stays_near_the_truth(long_hall_runs):
         assert (np.abs(estimate - truth) <= 3.0 * std).all(), f"seed {LONG_SEEDS[b]}"
         # never further from the truth than the prior mean 0 (no estimate at all) by more than
         # the bias's turn-on std: the data may fail to pin it down, never drag it away
-        assert (np.abs(estimate - truth) <= np.abs(truth) + noise.gyro_bias_std_rad_s).all(), f"seed {LONG_SEEDS[b]}"
+        assert (np.abs(estimate - truth) <= np.abs(truth) + noise.gyro_bias_std_rad_s).all(), (
+            f"seed {LONG_SEEDS[b]}"
+        )

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from filterpy import kalman as filterpy_kalman
 
 from localization.ekf import ExtendedKalmanFilter
@@ -65,7 +64,9 @@ def _ours(filt, start, zs, compiled=False):
         process, measurement = CTRV.process_model(Q), pose_model(R)
     else:
         process = ProcessModel(CTRV.transition, Q, jacobian=CTRV.jacobian)
-        measurement = MeasurementModel(lambda x: x[..., :3], R, jacobian=lambda x: H, angle_indices=(2,))
+        measurement = MeasurementModel(
+            lambda x: x[..., :3], R, jacobian=lambda x: H, angle_indices=(2,)
+        )
     belief = Gaussian(start, P0, angle_indices=(2,))
     out = []
     for z in zs:
@@ -76,7 +77,9 @@ def _ours(filt, start, zs, compiled=False):
 
 def _assert_same(ours, theirs):
     headings = np.array([m[2] for m, _ in ours])
-    assert headings.max() > 2.5 and headings.min() < -2.5, "the heading must cross +-pi in this test"
+    assert headings.max() > 2.5 and headings.min() < -2.5, (
+        "the heading must cross +-pi in this test"
+    )
     for (m, p), (fm, fp) in zip(ours, theirs):
         np.testing.assert_allclose(_residual(m, fm), 0.0, atol=1e-10)
         np.testing.assert_allclose(p, fp, rtol=0, atol=1e-10)
@@ -86,10 +89,17 @@ def _assert_same(ours, theirs):
 def test_ukf_equals_filterpy_ukf(data, compiled):
     start, zs = data
     ukf = filterpy_kalman.UnscentedKalmanFilter(
-        dim_x=5, dim_z=3, dt=DT_S, hx=lambda x: x[:3], fx=CTRV.transition,
+        dim_x=5,
+        dim_z=3,
+        dt=DT_S,
+        hx=lambda x: x[:3],
+        fx=CTRV.transition,
         points=filterpy_kalman.MerweScaledSigmaPoints(5, alpha=0.1, beta=2.0, kappa=0.0),
-        x_mean_fn=_mean_about_centre, z_mean_fn=_mean_about_centre,
-        residual_x=_residual, residual_z=_residual, state_add=lambda a, b: _wrap_heading(a + b),
+        x_mean_fn=_mean_about_centre,
+        z_mean_fn=_mean_about_centre,
+        residual_x=_residual,
+        residual_z=_residual,
+        state_add=lambda a, b: _wrap_heading(a + b),
     )
     ukf.x, ukf.P, ukf.Q, ukf.R = start.copy(), P0.copy(), Q.copy(), R.copy()
     theirs = []
@@ -97,7 +107,12 @@ def test_ukf_equals_filterpy_ukf(data, compiled):
         ukf.predict()
         ukf.update(z)
         theirs.append((ukf.x.copy(), ukf.P.copy()))
-    ours = _ours(UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.1, beta=2.0, kappa=0.0)), start, zs, compiled)
+    ours = _ours(
+        UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.1, beta=2.0, kappa=0.0)),
+        start,
+        zs,
+        compiled,
+    )
     _assert_same(ours, theirs)
 
 

@@ -61,7 +61,9 @@ FILTERS = {
     "UKF spread": UnscentedKalmanFilter(SpreadSigmaPoints(a=0.7)),
     "EKF": ExtendedKalmanFilter(),
     "IEKF": IteratedExtendedKalmanFilter(IterationSettings(max_iterations=5, tolerance=1e-10)),
-    "IUKF": IteratedUnscentedKalmanFilter(iteration=IterationSettings(max_iterations=5, tolerance=1e-10)),
+    "IUKF": IteratedUnscentedKalmanFilter(
+        iteration=IterationSettings(max_iterations=5, tolerance=1e-10)
+    ),
 }
 
 
@@ -76,7 +78,9 @@ def test_every_filter_equals_the_linear_kalman_filter(seed, n, m):
             belief = kf.update(kf.predict(belief, process), z, measurement)
             scale = 1.0 + np.abs(x_ref).max()
             np.testing.assert_allclose(belief.mean, x_ref, rtol=0, atol=1e-9 * scale, err_msg=name)
-            np.testing.assert_allclose(belief.cov, p_ref, rtol=0, atol=1e-9 * (1 + np.abs(p_ref).max()), err_msg=name)
+            np.testing.assert_allclose(
+                belief.cov, p_ref, rtol=0, atol=1e-9 * (1 + np.abs(p_ref).max()), err_msg=name
+            )
 
 
 def test_tiny_alpha_still_equals_the_kalman_filter():
@@ -122,7 +126,9 @@ def test_iekf_with_one_iteration_is_the_ekf_on_a_nonlinear_model(seed):
     measurement = MeasurementModel(
         lambda x: (x[..., 0] * x[..., 1] ** 2)[..., None],
         np.array([[0.5]]),
-        jacobian=lambda x: np.stack([x[..., 1] ** 2, 2 * x[..., 0] * x[..., 1]], axis=-1)[..., None, :],
+        jacobian=lambda x: np.stack([x[..., 1] ** 2, 2 * x[..., 0] * x[..., 1]], axis=-1)[
+            ..., None, :
+        ],
     )
     ekf = ExtendedKalmanFilter()
     iekf = IteratedExtendedKalmanFilter(IterationSettings(max_iterations=1, tolerance=None))
@@ -145,8 +151,12 @@ def test_modified_filters_reduce_to_kalman_filters_on_a_decoupled_linear_model()
     p0 = np.diag([0.5, 0.4, 0.3])
     x0 = np.array([1.0, -0.5, 0.2])
     zs = rng.standard_normal((10, 1))
-    process = ProcessModel(lambda s: s @ a.T, q, jacobian=lambda s: np.broadcast_to(a, s.shape[:-1] + (3, 3)))
-    measurement = MeasurementModel(lambda s: s @ h.T, r, jacobian=lambda s: np.broadcast_to(h, s.shape[:-1] + (1, 3)))
+    process = ProcessModel(
+        lambda s: s @ a.T, q, jacobian=lambda s: np.broadcast_to(a, s.shape[:-1] + (3, 3))
+    )
+    measurement = MeasurementModel(
+        lambda s: s @ h.T, r, jacobian=lambda s: np.broadcast_to(h, s.shape[:-1] + (1, 3))
+    )
     subsystem = LinearSubsystem(
         2,
         transition=lambda y: np.broadcast_to(a_x, y.shape[:-1] + (2, 2)),
@@ -163,4 +173,6 @@ def test_modified_filters_reduce_to_kalman_filters_on_a_decoupled_linear_model()
             np.testing.assert_allclose(belief.full.cov, p_full, atol=1e-10, err_msg=mkf.name)
             np.testing.assert_allclose(belief.linear.mean, x_lin, atol=1e-10, err_msg=mkf.name)
             np.testing.assert_allclose(belief.linear.cov, p_lin, atol=1e-10, err_msg=mkf.name)
-            np.testing.assert_allclose(belief.estimate, np.concatenate([x_lin, x_full[2:]]), atol=1e-10)
+            np.testing.assert_allclose(
+                belief.estimate, np.concatenate([x_lin, x_full[2:]]), atol=1e-10
+            )

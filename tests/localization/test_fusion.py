@@ -14,7 +14,13 @@ from hypothesis import strategies as st
 from scipy.stats import truncnorm
 
 from localization.errors import EstimationError
-from localization.fusion import FUSION_RULES, clamp_heading, fuse, nearest_component, truncated_standard_normal
+from localization.fusion import (
+    FUSION_RULES,
+    clamp_heading,
+    fuse,
+    nearest_component,
+    truncated_standard_normal,
+)
 from localization.gaussian import Gaussian
 
 N = 8
@@ -51,11 +57,15 @@ def test_clamp_is_the_nearest_point_of_the_box_by_brute_force_and_shapely():
         rectangle = shapely.box(xl, yl, xu, yu)
         gap = np.hypot(*(clamped - point))
         assert gap == pytest.approx(rectangle.distance(shapely.Point(point)), abs=1e-12)
-        grid = np.stack(np.meshgrid(np.linspace(xl, xu, 201), np.linspace(yl, yu, 201)), axis=-1).reshape(-1, 2)
+        grid = np.stack(
+            np.meshgrid(np.linspace(xl, xu, 201), np.linspace(yl, yu, 201)), axis=-1
+        ).reshape(-1, 2)
         brute = grid[np.argmin(np.hypot(*(grid - point).T))]
         assert np.hypot(*(clamped - brute)) <= 0.01 * max(xu - xl, yu - yl) + 1e-12
         assert report.moved[0] == (gap > 0)
-        assert np.array_equal(fused.mean[0], belief_at([point, point]).mean[0])  # UKF-only row untouched
+        assert np.array_equal(
+            fused.mean[0], belief_at([point, point]).mean[0]
+        )  # UKF-only row untouched
 
 
 def test_a_position_inside_the_box_is_left_alone():
@@ -75,7 +85,9 @@ def test_the_nearest_component_is_used_and_reported():
         fused, report = fuse(belief_at([point, point]), boxes, labels, rows=[1])
         names = np.unique(labels)
         unions = [
-            shapely.union_all([shapely.box(b[0, 0], b[1, 0], b[0, 1], b[1, 1]) for b in boxes[labels == name]])
+            shapely.union_all(
+                [shapely.box(b[0, 0], b[1, 0], b[0, 1], b[1, 1]) for b in boxes[labels == name]]
+            )
             for name in names
         ]
         distances = [union.distance(shapely.Point(point)) for union in unions]
@@ -121,12 +133,21 @@ def test_heading_clamp_across_pi_in_the_fusion():
     positions = [[0.5, 0.5]] * 4
     before = belief_at(positions)
     mean = np.array(before.mean)
-    mean[:, 2] = [-3.1, -2.5, 2.5, 0.0]  # inside (3.183), near 3.4, near 3.0, opposite: 3.0 and 3.4 tie-ish
-    fused, report = fuse(Gaussian(mean, before.cov, (2,)), box, rows=[0, 1, 2, 3], rule="clamp_heading")
+    mean[:, 2] = [
+        -3.1,
+        -2.5,
+        2.5,
+        0.0,
+    ]  # inside (3.183), near 3.4, near 3.0, opposite: 3.0 and 3.4 tie-ish
+    fused, report = fuse(
+        Gaussian(mean, before.cov, (2,)), box, rows=[0, 1, 2, 3], rule="clamp_heading"
+    )
     expected = [-3.1, 3.4 - 2 * math.pi, 3.0]
     assert np.allclose(fused.mean[:3, 2], expected)
     assert list(report.heading_moved[:3]) == [False, True, True]
-    assert angular_gap(fused.mean[3, 2], 0.0) == pytest.approx(min(angular_gap(3.0, 0.0), angular_gap(3.4, 0.0)))
+    assert angular_gap(fused.mean[3, 2], 0.0) == pytest.approx(
+        min(angular_gap(3.0, 0.0), angular_gap(3.4, 0.0))
+    )
     plain, _ = fuse(Gaussian(mean, before.cov, (2,)), box, rows=[0, 1, 2, 3], rule="clamp")
     assert np.array_equal(plain.mean[:, 2], mean[:, 2])  # the paper's rule leaves the heading
 
@@ -137,8 +158,12 @@ def test_truncated_normal_moments_match_scipy():
     upper = lower + rng.uniform(0.01, 5, 200)
     mean, ratio = truncated_standard_normal(lower, upper)
     reference_mean, reference_var = truncnorm.stats(lower, upper, moments="mv")
-    assert np.allclose(mean, reference_mean, atol=1e-9) and np.allclose(ratio, reference_var, rtol=1e-7)
-    far_mean, far_ratio = truncated_standard_normal(np.array([1e3, -1e3 - 1]), np.array([1e3 + 1, -1e3]))
+    assert np.allclose(mean, reference_mean, atol=1e-9) and np.allclose(
+        ratio, reference_var, rtol=1e-7
+    )
+    far_mean, far_ratio = truncated_standard_normal(
+        np.array([1e3, -1e3 - 1]), np.array([1e3 + 1, -1e3])
+    )
     assert np.allclose(far_mean, [1e3 + 1e-3, -1e3 - 1e-3], atol=1e-6) and (far_ratio > 0).all()
 
 
@@ -207,4 +232,6 @@ def test_every_rule_keeps_the_fused_position_in_the_box():
             box = random_boxes(rng, 1)
             point = rng.uniform(-8, 8, (3, 2))
             after, _ = fuse(belief_at(point, rng=rng), box, rows=[0, 1, 2], rule=rule)
-            assert (after.mean[:, :2] >= box[0, :2, 0]).all() and (after.mean[:, :2] <= box[0, :2, 1]).all()
+            assert (after.mean[:, :2] >= box[0, :2, 0]).all() and (
+                after.mean[:, :2] <= box[0, :2, 1]
+            ).all()

@@ -55,7 +55,9 @@ def test_transition_jacobian_matches_finite_differences(model, dt_s):
     rng = np.random.default_rng(1)
     x = random_states(model, rng, 400)
     analytic = model.jacobian(x, dt_s)
-    numeric = finite_difference_jacobian(lambda s: model.transition(s, dt_s), x, model.angle_indices)
+    numeric = finite_difference_jacobian(
+        lambda s: model.transition(s, dt_s), x, model.angle_indices
+    )
     scale = 1.0 + np.abs(analytic)
     np.testing.assert_array_less(np.abs(analytic - numeric) / scale, 2e-6)
 
@@ -67,7 +69,9 @@ def test_odometry_jacobian_matches_finite_differences(model):
     analytic = model.odometry_jacobian(x)
     numeric = finite_difference_jacobian(model.odometry, x, ())
     np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(mm.gps_jacobian(x), finite_difference_jacobian(mm.gps_position, x, ()))
+    np.testing.assert_allclose(
+        mm.gps_jacobian(x), finite_difference_jacobian(mm.gps_position, x, ())
+    )
 
 
 def test_cv_speed_jacobian_at_standstill_is_zero_without_warning():
@@ -77,7 +81,9 @@ def test_cv_speed_jacobian_at_standstill_is_zero_without_warning():
 
 
 def test_trig_moments_match_quadrature_on_both_sides_of_the_series_switch():
-    u = np.array([0.0, 1e-300, 1e-10, -1e-5, 0.05, 0.0999999, 0.1, -0.1000001, 0.5, -0.7, 2.0, -6.0, 40.0])
+    u = np.array(
+        [0.0, 1e-300, 1e-10, -1e-5, 0.05, 0.0999999, 0.1, -0.1000001, 0.5, -0.7, 2.0, -6.0, 40.0]
+    )
     cos_m, sin_m = mm.trig_moments(u)
     for k in range(3):
         for ui, c_val, s_val in zip(u, cos_m[k], sin_m[k], strict=True):
@@ -148,7 +154,9 @@ def test_paper_fresnel_form_integrates_eq15_heading_not_the_cca_model():
     gap = np.linalg.norm(paper_eq17_position(x0, dt_s) - mm.cca_transition(x0, dt_s)[:2])
     assert gap > 1.0  # metres: eq. 15's heading turns too fast when a != 0
     x0[4] = 1e-9  # without acceleration the two headings agree
-    np.testing.assert_allclose(paper_eq17_position(x0, dt_s), mm.cca_transition(x0, dt_s)[:2], atol=1e-5)
+    np.testing.assert_allclose(
+        paper_eq17_position(x0, dt_s), mm.cca_transition(x0, dt_s)[:2], atol=1e-5
+    )
 
 
 def test_ctra_with_zero_acceleration_is_ctrv():
@@ -156,7 +164,9 @@ def test_ctra_with_zero_acceleration_is_ctrv():
     x6 = random_states(mm.CTRA, rng, 200)
     x6[:, 4] = 0.0
     x5 = x6[:, [0, 1, 2, 3, 5]]
-    np.testing.assert_allclose(mm.ctra_transition(x6, 0.7)[:, [0, 1, 2, 3, 5]], mm.ctrv_transition(x5, 0.7))
+    np.testing.assert_allclose(
+        mm.ctra_transition(x6, 0.7)[:, [0, 1, 2, 3, 5]], mm.ctrv_transition(x5, 0.7)
+    )
     jac6 = mm.ctra_jacobian(x6, 0.7)[:, [0, 1, 2, 3, 5]][:, :, [0, 1, 2, 3, 5]]
     np.testing.assert_allclose(jac6, mm.ctrv_jacobian(x5, 0.7))
 
@@ -168,7 +178,9 @@ def test_ctrv_with_vanishing_turn_rate_is_a_straight_line():
     np.testing.assert_array_equal(mm.ctrv_transition(x, dt_s)[:2], straight)
     for omega in (1e-13, -1e-9, 1e-7):
         x[4] = omega
-        np.testing.assert_allclose(mm.ctrv_transition(x, dt_s)[:2], straight, atol=30 * abs(omega) + 1e-12)
+        np.testing.assert_allclose(
+            mm.ctrv_transition(x, dt_s)[:2], straight, atol=30 * abs(omega) + 1e-12
+        )
     # CTRV against the textbook form v/omega (sin(theta + omega T) - sin theta) for a real turn
     x[4] = 0.3
     ref = x[:2] + 13.0 / 0.3 * np.array(
@@ -181,11 +193,21 @@ def test_ctra_matches_paper_eq8_eq9_away_from_zero_turn_rate():
     x = np.array([1.0, 2.0, -0.8, 7.0, 1.5, 0.4])
     dt_s = 1.3
     _, _, th, v, a, w = x
-    dx = ((v * w + a * w * dt_s) * math.sin(th + w * dt_s) + a * math.cos(th + w * dt_s)
-          - v * w * math.sin(th) - a * math.cos(th)) / w**2
-    dy = ((-v * w - a * w * dt_s) * math.cos(th + w * dt_s) + a * math.sin(th + w * dt_s)
-          + v * w * math.cos(th) - a * math.sin(th)) / w**2
-    np.testing.assert_allclose(mm.ctra_transition(x, dt_s), [1 + dx, 2 + dy, th + w * dt_s, v + a * dt_s, a, w])
+    dx = (
+        (v * w + a * w * dt_s) * math.sin(th + w * dt_s)
+        + a * math.cos(th + w * dt_s)
+        - v * w * math.sin(th)
+        - a * math.cos(th)
+    ) / w**2
+    dy = (
+        (-v * w - a * w * dt_s) * math.cos(th + w * dt_s)
+        + a * math.sin(th + w * dt_s)
+        + v * w * math.cos(th)
+        - a * math.sin(th)
+    ) / w**2
+    np.testing.assert_allclose(
+        mm.ctra_transition(x, dt_s), [1 + dx, 2 + dy, th + w * dt_s, v + a * dt_s, a, w]
+    )
 
 
 def test_cca_and_ctrv_agree_when_curvature_matches_turn_rate_without_acceleration():
@@ -193,7 +215,9 @@ def test_cca_and_ctrv_agree_when_curvature_matches_turn_rate_without_acceleratio
     x5 = random_states(mm.CTRV, rng, 200)
     x5[:, 3] = rng.uniform(1.0, 30.0, 200)
     x6 = np.concatenate([x5[:, :4], np.zeros((200, 1)), (x5[:, 4] / x5[:, 3])[:, None]], axis=1)
-    np.testing.assert_allclose(mm.cca_transition(x6, 0.9)[:, :4], mm.ctrv_transition(x5, 0.9)[:, :4], atol=1e-9)
+    np.testing.assert_allclose(
+        mm.cca_transition(x6, 0.9)[:, :4], mm.ctrv_transition(x5, 0.9)[:, :4], atol=1e-9
+    )
 
 
 def test_straight_line_limits_agree_across_all_models():
@@ -202,7 +226,9 @@ def test_straight_line_limits_agree_across_all_models():
     cca = mm.cca_transition(np.array([0, 0, theta, v, a, 0.0]), dt_s)
     np.testing.assert_allclose(ctra, cca, atol=1e-12)
     s = v * dt_s + 0.5 * a * dt_s**2
-    np.testing.assert_allclose(ctra[:2], s * np.array([math.cos(theta), math.sin(theta)]), atol=1e-12)
+    np.testing.assert_allclose(
+        ctra[:2], s * np.array([math.cos(theta), math.sin(theta)]), atol=1e-12
+    )
     cv = mm.cv_transition(np.array([0, 0, v * math.cos(theta), v * math.sin(theta)]), dt_s)
     ctrv = mm.ctrv_transition(np.array([0, 0, theta, v, 0.0]), dt_s)
     np.testing.assert_allclose(cv[:2], ctrv[:2], atol=1e-12)
@@ -240,11 +266,15 @@ def test_heading_wraps_across_plus_minus_pi(model):
 def test_noise_augmented_transition(model):
     rng = np.random.default_rng(7)
     x = random_states(model, rng, 50)
-    np.testing.assert_array_equal(model.transition_with_noise(x, np.zeros((50, 2)), 0.3), model.transition(x, 0.3))
+    np.testing.assert_array_equal(
+        model.transition_with_noise(x, np.zeros((50, 2)), 0.3), model.transition(x, 0.3)
+    )
     e = rng.normal(size=(50, 2))
     out = model.transition_with_noise(x, e, 0.3)
     idx = list(model.noise_indices)
-    np.testing.assert_allclose(out[:, idx], x[:, idx] + e)  # the driven quantities take the increment
+    np.testing.assert_allclose(
+        out[:, idx], x[:, idx] + e
+    )  # the driven quantities take the increment
     np.testing.assert_allclose(model.process_noise_std(0.04), 0.2 * np.array(model.noise_intensity))
 
 
@@ -255,7 +285,9 @@ def test_cv_noise_ramp_is_exact():
 
 
 def test_a_model_with_scattered_noise_entries_is_refused():
-    with pytest.raises(EstimationError, match="CTRV: noise_indices \\(2, 4\\) must be 2 consecutive entries"):
+    with pytest.raises(
+        EstimationError, match="CTRV: noise_indices \\(2, 4\\) must be 2 consecutive entries"
+    ):
         dataclasses.replace(mm.CTRV, noise_indices=(2, 4))
 
 
@@ -264,7 +296,6 @@ def test_bad_state_shape_and_time_step_are_refused():
         mm.ctrv_transition(np.zeros(6), 0.1)
     with pytest.raises(EstimationError, match="dt_s must be finite and > 0"):
         mm.CTRA.process_noise_std(0.0)
-
 
 
 @pytest.mark.parametrize("model", [mm.CTRV, mm.CTRA, mm.CCA], ids=lambda m: m.name)

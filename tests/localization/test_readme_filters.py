@@ -15,7 +15,7 @@ def test_the_filter_example_runs():
     section = text[text.index("## Filters and reproductions") :]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     namespace: dict = {}
-    exec(compile(code, "README.md", "exec"), namespace)  # noqa: S102 - our own documentation
+    exec(compile(code, "README.md", "exec"), namespace)
     belief = namespace["belief"]
     assert belief.mean.shape == (1000, 5) and belief.cov.shape == (1000, 5, 5)
     # the GPS update on a linear measurement is the Kalman update of the predicted belief

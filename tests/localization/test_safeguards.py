@@ -19,7 +19,11 @@ INDEFINITE = np.array([[1.0, 2.0], [2.0, 1.0]])  # eigenvalues 3 and -1
 
 
 def identity_process():
-    return ProcessModel(lambda x: x + 0.0, 0.01 * np.eye(2), jacobian=lambda x: np.broadcast_to(np.eye(2), x.shape + (2,)))
+    return ProcessModel(
+        lambda x: x + 0.0,
+        0.01 * np.eye(2),
+        jacobian=lambda x: np.broadcast_to(np.eye(2), x.shape + (2,)),
+    )
 
 
 def product_measurement():
@@ -33,7 +37,9 @@ def product_measurement():
 def test_raise_policy_names_the_step():
     ukf = UnscentedKalmanFilter()
     belief = Gaussian(np.zeros(2), INDEFINITE)
-    with pytest.raises(EstimationError, match="UKF predict: the covariance is not positive definite"):
+    with pytest.raises(
+        EstimationError, match="UKF predict: the covariance is not positive definite"
+    ):
         ukf.predict(belief, identity_process())
     with pytest.raises(EstimationError, match="UKF update"):
         ukf.update(belief, np.array([0.0]), product_measurement())
@@ -52,20 +58,36 @@ def test_repair_policy_reports_the_jitter_and_only_touches_the_broken_run():
         alone = ukf.predict(Gaussian(np.zeros(2), good), identity_process())
     np.testing.assert_allclose(out.cov[0], alone.cov, atol=1e-14)
     with pytest.warns(CovarianceRepairWarning):
-        updated = ukf.update(Gaussian(np.ones(2), INDEFINITE), np.array([1.0]), product_measurement())
+        updated = ukf.update(
+            Gaussian(np.ones(2), INDEFINITE), np.array([1.0]), product_measurement()
+        )
     assert np.linalg.eigvalsh(updated.cov).min() > 0.0  # the update went on from the repaired prior
 
 
 @pytest.mark.parametrize(
-    "kf", [UnscentedKalmanFilter(), ExtendedKalmanFilter(), IteratedExtendedKalmanFilter(), IteratedUnscentedKalmanFilter()]
+    "kf",
+    [
+        UnscentedKalmanFilter(),
+        ExtendedKalmanFilter(),
+        IteratedExtendedKalmanFilter(),
+        IteratedUnscentedKalmanFilter(),
+    ],
 )
 def test_non_finite_inputs_are_refused(kf):
     belief = Gaussian(np.array([1.0, 2.0]), np.eye(2))
     with pytest.raises(EstimationError, match="update: the measurement z is not finite"):
         kf.update(belief, np.array([np.nan]), product_measurement())
     with pytest.raises(EstimationError, match="argument 1 is not finite"):
-        kf.predict(belief, ProcessModel(lambda x, dt: x * dt, np.eye(2), jacobian=lambda x, dt: np.eye(2) * dt), float("inf"))
-    nan_model = ProcessModel(lambda x: x * np.nan, np.eye(2), jacobian=lambda x: np.broadcast_to(np.eye(2), x.shape + (2,)))
+        kf.predict(
+            belief,
+            ProcessModel(lambda x, dt: x * dt, np.eye(2), jacobian=lambda x, dt: np.eye(2) * dt),
+            float("inf"),
+        )
+    nan_model = ProcessModel(
+        lambda x: x * np.nan,
+        np.eye(2),
+        jacobian=lambda x: np.broadcast_to(np.eye(2), x.shape + (2,)),
+    )
     with pytest.raises(EstimationError, match="predict: the predicted mean"):
         kf.predict(belief, nan_model)
 
@@ -88,16 +110,22 @@ def test_beliefs_and_models_are_validated_at_construction():
     with pytest.raises(EstimationError, match="max_iterations"):
         IterationSettings(max_iterations=0)
     with pytest.raises(EstimationError, match="jacobian"):
-        ExtendedKalmanFilter().predict(Gaussian(np.zeros(2), np.eye(2)), ProcessModel(lambda x: x, np.eye(2)))
+        ExtendedKalmanFilter().predict(
+            Gaussian(np.zeros(2), np.eye(2)), ProcessModel(lambda x: x, np.eye(2))
+        )
 
 
 def test_a_belief_is_immutable_and_wrapped():
     belief = Gaussian(np.array([0.0, 3 * np.pi / 2]), np.diag([4.0, 0.25]), angle_indices=(1,))
     assert belief.mean[1] == pytest.approx(-np.pi / 2)
     np.testing.assert_allclose(belief.std, [2.0, 0.5])
-    np.testing.assert_allclose(belief.residual(np.array([1.0, np.pi / 2 + 0.1])), [1.0, -np.pi + 0.1])
+    np.testing.assert_allclose(
+        belief.residual(np.array([1.0, np.pi / 2 + 0.1])), [1.0, -np.pi + 0.1]
+    )
     batch = Gaussian(np.zeros((4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2)))
-    assert batch.batch_shape == (4,) and batch[1:3].mean.shape == (2, 2) and batch[0].batch_shape == ()
+    assert (
+        batch.batch_shape == (4,) and batch[1:3].mean.shape == (2, 2) and batch[0].batch_shape == ()
+    )
     with pytest.raises(EstimationError, match="cannot be indexed"):
         belief[0]
     with pytest.raises(ValueError):
@@ -131,7 +159,9 @@ def test_iteration_cap_warns_and_a_fixed_count_does_not(kf_class):
     np.testing.assert_allclose(grad, 0.0, atol=1e-7)
 
 
-@pytest.mark.parametrize("kf", [UnscentedKalmanFilter(), ExtendedKalmanFilter(), IteratedUnscentedKalmanFilter()])
+@pytest.mark.parametrize(
+    "kf", [UnscentedKalmanFilter(), ExtendedKalmanFilter(), IteratedUnscentedKalmanFilter()]
+)
 def test_a_measurement_of_the_wrong_shape_is_refused_not_broadcast(kf):
     batch = Gaussian(np.ones((3, 2)), np.broadcast_to(np.eye(2), (3, 2, 2)))
     with pytest.raises(EstimationError, match=r"z has shape \(1,\), expected \(3, 1\)"):

@@ -27,12 +27,18 @@ def test_weights_match_the_papers_formulas():
     assert w.cov_weights[0] == pytest.approx((gamma2 - n) / gamma2 + 1 - 1e-10 + 2.0)
     assert w.wi == pytest.approx(1 / (2 * gamma2))
     k = KappaSigmaPoints(kappa=2.0).weights(3)  # paper 000 eq. 1
-    assert k.wm0 == pytest.approx(2.0 / 5.0) and k.wi == pytest.approx(1 / 10) and k.gamma**2 == pytest.approx(5)
+    assert (
+        k.wm0 == pytest.approx(2.0 / 5.0)
+        and k.wi == pytest.approx(1 / 10)
+        and k.gamma**2 == pytest.approx(5)
+    )
     s = SpreadSigmaPoints(a=0.1).weights(3)  # paper 004 eq. 3, 7
     assert s.wm0 == pytest.approx(1 - 100) and s.wi == pytest.approx(1 / (2 * 3 * 0.01))
     assert s.gamma == pytest.approx(0.1 * np.sqrt(3))
     for weights in (w, k, s):
-        assert weights.mean_weights.sum() == pytest.approx(1.0, abs=1e-12 * abs(weights.wm0) + 1e-15)
+        assert weights.mean_weights.sum() == pytest.approx(
+            1.0, abs=1e-12 * abs(weights.wm0) + 1e-15
+        )
 
 
 @pytest.mark.parametrize(
@@ -70,8 +76,15 @@ def test_square_of_a_gaussian_exact_mean_and_known_variance(m, p, alpha):
 
 
 @settings(max_examples=20, deadline=None)
-@given(r=st.floats(1.0, 300.0), bearing=st.floats(-3.1, 3.1), var_r=st.floats(0.01, 10.0), var_b=st.floats(1e-4, 0.1))
-def test_tiny_alpha_polar_to_cartesian_is_psd_and_matches_a_moderate_alpha(r, bearing, var_r, var_b):
+@given(
+    r=st.floats(1.0, 300.0),
+    bearing=st.floats(-3.1, 3.1),
+    var_r=st.floats(0.01, 10.0),
+    var_b=st.floats(1e-4, 0.1),
+)
+def test_tiny_alpha_polar_to_cartesian_is_psd_and_matches_a_moderate_alpha(
+    r, bearing, var_r, var_b
+):
     """alpha = 1e-5 (Wm_0 ~ -1e10): the covariance stays PSD (centre form, c0 >= 1) and the mean
     equals the alpha = 1e-3 one up to the finite-difference rounding ~ eps |y| / gamma^2."""
 

@@ -28,9 +28,14 @@ POSE = MeasurementModel(lambda x: x[..., :3], np.diag([0.04, 0.04, 0.01]), angle
 
 def problem(seed):
     rng = np.random.default_rng(seed)
-    mean = np.column_stack([
-        rng.normal(0.0, 5.0, (RUNS, 2)), rng.uniform(-np.pi, np.pi, RUNS), rng.uniform(0.5, 3.0, RUNS), rng.normal(0, 0.5, RUNS),
-    ])
+    mean = np.column_stack(
+        [
+            rng.normal(0.0, 5.0, (RUNS, 2)),
+            rng.uniform(-np.pi, np.pi, RUNS),
+            rng.uniform(0.5, 3.0, RUNS),
+            rng.normal(0, 0.5, RUNS),
+        ]
+    )
     roots = rng.normal(0.0, 0.1, (RUNS, 5, 5))
     cov = roots @ roots.mT + 1e-3 * np.eye(5)
     dts = rng.uniform(0.05, 0.2, RUNS)  # a per-run argument: sliced with the runs

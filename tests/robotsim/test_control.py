@@ -18,7 +18,10 @@ def test_pure_pursuit_visits_every_waypoint_and_stops_at_the_last():
     waypoints = np.array([[4.5, 1.0], [8.8, 1.0], [8.8, 4.0], [4.5, 4.0], [4.5, 7.0], [1.0, 7.0]])
     route = Route(waypoints, cruise_speed_m_s=0.4, lookahead_m=0.4)
     log = simulate(
-        builtin_map("hall"), route, start_pose=(1.0, 1.0, 0.5), duration_s=80.0,
+        builtin_map("hall"),
+        route,
+        start_pose=(1.0, 1.0, 0.5),
+        duration_s=80.0,
         rng=np.random.default_rng(0),
     )
     distance = np.linalg.norm(log.pose[:, None, :2] - waypoints, axis=2)
@@ -37,7 +40,10 @@ def test_looping_route_keeps_going_round():
     waypoints = np.array([[2.0, 1.0], [6.0, 1.0], [6.0, 4.0], [2.0, 4.0]])
     route = Route(waypoints, loop=True)
     log = simulate(
-        builtin_map("hall"), route, start_pose=(2.0, 1.0, 0.0), duration_s=90.0,
+        builtin_map("hall"),
+        route,
+        start_pose=(2.0, 1.0, 0.0),
+        duration_s=90.0,
         rng=np.random.default_rng(0),
     )
     near_start = np.linalg.norm(log.pose[:, :2] - waypoints[0], axis=1) < 0.2
@@ -49,7 +55,10 @@ def test_looping_route_keeps_going_round():
 def test_a_route_starting_behind_the_robot_turns_in_place_first():
     route = Route([[2.0, 4.0]])
     log = simulate(
-        builtin_map("hall"), route, start_pose=(5.0, 4.0, 0.0), duration_s=20.0,
+        builtin_map("hall"),
+        route,
+        start_pose=(5.0, 4.0, 0.0),
+        duration_s=20.0,
         rng=np.random.default_rng(0),
     )
     assert log.pose[:, 0].max() < 5.05  # it never drove away from the goal
@@ -83,7 +92,10 @@ def test_limited_commands_respect_speed_and_acceleration_limits(wanted):
 def test_simulated_truth_respects_the_robot_limits():
     route = Route([[8.5, 1.0], [8.5, 7.0], [1.0, 7.0]], cruise_speed_m_s=1.0)  # asks too much
     log = simulate(
-        builtin_map("hall"), route, start_pose=(1.0, 1.0, 1.0), duration_s=40.0,
+        builtin_map("hall"),
+        route,
+        start_pose=(1.0, 1.0, 1.0),
+        duration_s=40.0,
         rng=np.random.default_rng(0),
     )
     assert np.abs(log.velocity[:, 0]).max() <= ROBOT.v_max_m_s + 1e-6

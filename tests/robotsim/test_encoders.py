@@ -13,8 +13,12 @@ def test_ticks_are_integers_and_count_the_true_wheel_rotation():
     robot = RobotParams(ticks_per_rev=500)
     profile = ScriptedProfile([0.0, 5.0], [0.3, 0.2], [0.0, 0.5])
     log = simulate(
-        builtin_map("hall"), profile, start_pose=(3.0, 4.0, 0.0), duration_s=10.0,
-        rng=np.random.default_rng(1), robot=robot,
+        builtin_map("hall"),
+        profile,
+        start_pose=(3.0, 4.0, 0.0),
+        duration_s=10.0,
+        rng=np.random.default_rng(1),
+        robot=robot,
     )
     assert log.wheel_ticks.dtype == np.int64
     assert log.wheel_ticks.shape == (1001, 2)
@@ -51,7 +55,10 @@ def test_slip_changes_the_ticks_of_a_run():
     clean = simulate(builtin_map("hall"), profile, **common)
     common["rng"] = np.random.default_rng(1)
     slipping = simulate(
-        builtin_map("hall"), profile, sensors=SensorSuite(encoders=EncoderParams(slip_std=0.05)), **common
+        builtin_map("hall"),
+        profile,
+        sensors=SensorSuite(encoders=EncoderParams(slip_std=0.05)),
+        **common,
     )
     assert not np.array_equal(clean.wheel_ticks, slipping.wheel_ticks)
     np.testing.assert_array_equal(clean.pose, slipping.pose)

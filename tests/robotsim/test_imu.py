@@ -17,13 +17,17 @@ RATE_HZ = 100.0
 
 def gyro(noise=0.0, turn_on=0.0, walk=0.0):
     return GyroParams(
-        noise_density_rad_s_sqrt_hz=noise, turn_on_bias_std_rad_s=turn_on, bias_random_walk_rad_s_sqrt_s=walk
+        noise_density_rad_s_sqrt_hz=noise,
+        turn_on_bias_std_rad_s=turn_on,
+        bias_random_walk_rad_s_sqrt_s=walk,
     )
 
 
 def accelerometer(noise=0.0, turn_on=0.0, walk=0.0):
     return AccelerometerParams(
-        noise_density_m_s2_sqrt_hz=noise, turn_on_bias_std_m_s2=turn_on, bias_random_walk_m_s2_sqrt_s=walk
+        noise_density_m_s2_sqrt_hz=noise,
+        turn_on_bias_std_m_s2=turn_on,
+        bias_random_walk_m_s2_sqrt_s=walk,
     )
 
 

@@ -164,10 +164,21 @@ def test_a_room_gets_the_same_outer_wall_in_every_format():
         ),
         "wkt linestring": SegmentMap.from_wkt("LINESTRING (0 0, 6 0, 6 5, 0 5, 0 0)"),
         "geojson linestrings": SegmentMap.from_geojson(
-            {"type": "FeatureCollection", "features": [
-                {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": room[:3]}},
-                {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": room[2:]}},
-            ]}
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {},
+                        "geometry": {"type": "LineString", "coordinates": room[:3]},
+                    },
+                    {
+                        "type": "Feature",
+                        "properties": {},
+                        "geometry": {"type": "LineString", "coordinates": room[2:]},
+                    },
+                ],
+            }
         ),
         "inline": SegmentMap.from_segments(
             np.array([room[:-1], room[1:]], dtype=float).swapaxes(0, 1),
@@ -175,6 +186,10 @@ def test_a_room_gets_the_same_outer_wall_in_every_format():
         ),
     }
     for name, segment_map in maps.items():
-        assert segment_map.boundary is not None and _same_polygon(segment_map.boundary, polygon), name
+        assert segment_map.boundary is not None and _same_polygon(segment_map.boundary, polygon), (
+            name
+        )
     assert SegmentMap.from_wkt("LINESTRING (0 0, 6 0, 6 5, 0 5)").boundary is None  # not closed
-    assert SegmentMap.from_wkt("MULTILINESTRING ((0 0, 1 0, 1 1, 0 0), (5 5, 6 6))").boundary is None
+    assert (
+        SegmentMap.from_wkt("MULTILINESTRING ((0 0, 1 0, 1 1, 0 0), (5 5, 6 6))").boundary is None
+    )

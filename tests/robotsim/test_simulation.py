@@ -18,24 +18,43 @@ HALL = builtin_map("hall")
 
 def run(seed, duration_s=30.0, **settings):
     return simulate(
-        HALL, ROUTE, start_pose=(1.0, 1.0, 0.0), duration_s=duration_s,
-        rng=np.random.default_rng(seed), **settings,
+        HALL,
+        ROUTE,
+        start_pose=(1.0, 1.0, 0.0),
+        duration_s=duration_s,
+        rng=np.random.default_rng(seed),
+        **settings,
     )
 
 
 def arrays(log):
-    return {f.name: getattr(log, f.name) for f in dataclasses.fields(SimulationLog)
-            if isinstance(getattr(log, f.name), np.ndarray)}
+    return {
+        f.name: getattr(log, f.name)
+        for f in dataclasses.fields(SimulationLog)
+        if isinstance(getattr(log, f.name), np.ndarray)
+    }
 
 
 def test_log_layout_matches_the_contract():
     log = run(1, duration_s=12.0)
     n, m, k = 1201, 13, 16
     expected = {
-        "t_s": (n,), "pose": (n, 3), "velocity": (n, 2), "command": (n, 2), "wheel_ticks": (n, 2),
-        "gyro_rad_s": (n,), "accel_m_s2": (n, 2), "gyro_bias_rad_s": (n,), "accel_bias_m_s2": (n, 2),
-        "sonar_t_s": (m,), "sonar_pose": (m, 3), "sonar_range_m": (m, k), "sonar_fault": (m, k),
-        "sonar_true_range_m": (m, k), "kidnap_t_s": (0,), "wall_contact": (n,),
+        "t_s": (n,),
+        "pose": (n, 3),
+        "velocity": (n, 2),
+        "command": (n, 2),
+        "wheel_ticks": (n, 2),
+        "gyro_rad_s": (n,),
+        "accel_m_s2": (n, 2),
+        "gyro_bias_rad_s": (n,),
+        "accel_bias_m_s2": (n, 2),
+        "sonar_t_s": (m,),
+        "sonar_pose": (m, 3),
+        "sonar_range_m": (m, k),
+        "sonar_fault": (m, k),
+        "sonar_true_range_m": (m, k),
+        "kidnap_t_s": (0,),
+        "wall_contact": (n,),
     }
     assert {name: a.shape for name, a in arrays(log).items()} == expected
     assert log.rate_hz == 100.0
@@ -61,15 +80,18 @@ def test_sonar_readings_come_from_the_exact_cone_model_at_the_scan_poses():
     belt = SonarBeltParams.default_belt(outlier_prob=0.05)
     log = run(2, duration_s=60.0, sensors=SensorSuite(sonar=belt))
     np.testing.assert_array_equal(log.sonar_pose, log.pose[::100])
-    exact = cone_distances(log.sonar_pose, HALL.segments, belt.mount_xy, belt.mount_angle_rad,
-                           belt.half_aperture_rad)
+    exact = cone_distances(
+        log.sonar_pose, HALL.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+    )
     np.testing.assert_array_equal(log.sonar_true_range_m, exact)
     good = ~log.sonar_fault
     echo = exact <= belt.d_max_m
     assert echo.any() and (~echo).any() and log.sonar_fault.any()
     np.testing.assert_array_equal(np.isinf(log.sonar_range_m[good]), ~echo[good])
     error = np.abs(log.sonar_range_m - exact)[good & echo]
-    assert np.all(error <= belt.error_abs_bound_m + belt.error_rel_bound * exact[good & echo] + 1e-12)
+    assert np.all(
+        error <= belt.error_abs_bound_m + belt.error_rel_bound * exact[good & echo] + 1e-12
+    )
 
 
 def test_inertial_readings_are_truth_plus_bias_plus_declared_white_noise():
@@ -95,10 +117,16 @@ def test_wall_contacts_come_from_pymunk_and_progress_is_reported():
 
     fractions = []
     log = simulate(
-        HALL, ScriptedProfile([0.0], [0.5], [0.0]), start_pose=(8.0, 3.5, 0.0), duration_s=8.0,
-        rng=np.random.default_rng(0), progress=fractions.append,
+        HALL,
+        ScriptedProfile([0.0], [0.5], [0.0]),
+        start_pose=(8.0, 3.5, 0.0),
+        duration_s=8.0,
+        rng=np.random.default_rng(0),
+        progress=fractions.append,
     )
-    clearance = point_segment_distance(log.pose[:, None, :2], HALL.segments[:, 0], HALL.segments[:, 1]).min(axis=1)
+    clearance = point_segment_distance(
+        log.pose[:, None, :2], HALL.segments[:, 0], HALL.segments[:, 1]
+    ).min(axis=1)
     reach = log.robot.radius_m + log.world.wall_radius_m
     assert log.wall_contact.any() and not log.wall_contact[:100].any()
     first = int(np.argmax(log.wall_contact))

@@ -20,7 +20,10 @@ SEEDS = range(4)
 @pytest.fixture(scope="module")
 def drives():
     """Four seeds of each drive, 300 s at 100 Hz."""
-    return {name: [make(np.random.default_rng(seed), 300.0) for seed in SEEDS] for name, make in DRIVES.items()}
+    return {
+        name: [make(np.random.default_rng(seed), 300.0) for seed in SEEDS]
+        for name, make in DRIVES.items()
+    }
 
 
 def test_drives_are_reproducible_by_seed():
@@ -62,7 +65,9 @@ def test_trajectory_obeys_the_single_track_kinematics(drives):
         v_mid = 0.5 * (d.speed_m_s[1:] + d.speed_m_s[:-1])
         np.testing.assert_allclose(np.hypot(*velocity.T), v_mid, atol=2e-3)
         turn = (np.diff(d.pose[:, 2]) + math.pi) % (2 * math.pi) - math.pi
-        np.testing.assert_allclose(turn / dt, 0.5 * (d.yaw_rate_rad_s[1:] + d.yaw_rate_rad_s[:-1]), atol=1e-9)
+        np.testing.assert_allclose(
+            turn / dt, 0.5 * (d.yaw_rate_rad_s[1:] + d.yaw_rate_rad_s[:-1]), atol=1e-9
+        )
         np.testing.assert_allclose(d.yaw_rate_rad_s, d.speed_m_s * d.curvature_1_m)
         np.testing.assert_allclose(np.diff(d.speed_m_s) / dt, d.accel_m_s2[:-1], atol=1e-6)
 
@@ -110,7 +115,9 @@ def test_sensor_noise_statistics_and_biases():
     np.testing.assert_allclose(flat.mean(axis=0), 0.0, atol=4 * 1.5 / math.sqrt(flat.shape[0]))
     np.testing.assert_allclose(flat.std(axis=0), params.gps_noise_std_m, rtol=0.03)
     assert abs(np.corrcoef(flat.T)[0, 1]) < 0.03
-    assert abs(np.corrcoef(gps_err[:, 1:, 0].ravel(), gps_err[:, :-1, 0].ravel())[0, 1]) < 0.03  # white
+    assert (
+        abs(np.corrcoef(gps_err[:, 1:, 0].ravel(), gps_err[:, :-1, 0].ravel())[0, 1]) < 0.03
+    )  # white
     true_v = drive.speed_m_s[meas.drive_index]
     scale = np.sum(meas.speed_m_s * true_v) / (meas.speed_m_s.shape[0] * np.sum(true_v**2))
     assert scale == pytest.approx(1.0 + params.speed_scale_error, abs=2e-4)
@@ -136,7 +143,11 @@ def test_bad_settings_are_refused_with_a_clear_message():
     with pytest.raises(RobotsimError, match="gps_noise_std_m must be finite"):
         VehicleSensorParams(gps_noise_std_m=float("nan"))
     with pytest.raises(RobotsimError, match="not a whole multiple of odometry_rate_hz"):
-        measure(drive, VehicleSensorParams(odometry_rate_hz=30.0, gps_rate_hz=1.0), np.random.default_rng(0))
+        measure(
+            drive,
+            VehicleSensorParams(odometry_rate_hz=30.0, gps_rate_hz=1.0),
+            np.random.default_rng(0),
+        )
     with pytest.raises(RobotsimError, match="runs must be an integer >= 1"):
         measure(drive, VehicleSensorParams(), np.random.default_rng(0), runs=0)
     with pytest.raises(RobotsimError, match="duration_s must be finite and >= 10 s"):
@@ -144,7 +155,9 @@ def test_bad_settings_are_refused_with_a_clear_message():
     with pytest.raises(RobotsimError, match="a_min_m_s2 must be finite and < 0"):
         VehicleParams(a_min_m_s2=1.0)
     with pytest.raises(RobotsimError, match="make the car reverse"):
-        integrate_single_track("x", np.full(100, -1.0), np.zeros(100), (0, 0, 0), 0.5, 100.0, VehicleParams())
+        integrate_single_track(
+            "x", np.full(100, -1.0), np.zeros(100), (0, 0, 0), 0.5, 100.0, VehicleParams()
+        )
 
 
 def test_robotsim_vehicle_does_not_import_localization():

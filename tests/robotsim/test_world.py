@@ -16,8 +16,13 @@ ROBOT = RobotParams(true_wheel_radius_left_m=0.0508, true_wheel_radius_right_m=0
 
 def run(profile, start, duration_s, the_map="hall", **settings):
     return simulate(
-        builtin_map(the_map), profile, start_pose=start, duration_s=duration_s,
-        rng=np.random.default_rng(0), robot=ROBOT, **settings,
+        builtin_map(the_map),
+        profile,
+        start_pose=start,
+        duration_s=duration_s,
+        rng=np.random.default_rng(0),
+        robot=ROBOT,
+        **settings,
     )
 
 
@@ -75,7 +80,11 @@ def test_kidnap_moves_the_robot_without_odometry():
 
 @pytest.mark.parametrize(
     ("pose", "words"),
-    [((0.1, 4.0, 0.0), "overlaps wall"), ((-3.0, 4.0, 0.0), "outside"), ((1.0, np.nan, 0.0), "finite")],
+    [
+        ((0.1, 4.0, 0.0), "overlaps wall"),
+        ((-3.0, 4.0, 0.0), "outside"),
+        ((1.0, np.nan, 0.0), "finite"),
+    ],
 )
 def test_bad_start_poses_are_refused(pose, words):
     with pytest.raises(RobotsimError, match=words):

@@ -44,7 +44,19 @@ def test_scenarios_lists_every_builtin_with_its_description(tmp_path):
 
 def test_run_writes_a_recording_and_summary_that_read_back(tmp_path):
     rrd, summary_path = tmp_path / "out" / "hall.rrd", tmp_path / "out" / "hall.json"
-    done = robotsim("run", "hall", "--duration", "3", "--seed", "4", "--rrd", str(rrd), "--summary", str(summary_path), cwd=tmp_path)
+    done = robotsim(
+        "run",
+        "hall",
+        "--duration",
+        "3",
+        "--seed",
+        "4",
+        "--rrd",
+        str(rrd),
+        "--summary",
+        str(summary_path),
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""  # not a terminal: no progress bar
     summary = json.loads(summary_path.read_text())
@@ -77,7 +89,9 @@ def test_run_writes_a_recording_and_summary_that_read_back(tmp_path):
         assert rows[entity] == scans, entity
     assert rows["/world/intervals/hull"] == scans + 1  # and its static style
     for branch in ("ukf_only", "fused"):
-        assert rows[f"/world/estimates/{branch}/position"] == -(-samples // 10) + 1, branch  # + static style
+        assert rows[f"/world/estimates/{branch}/position"] == -(-samples // 10) + 1, (
+            branch
+        )  # + static style
         assert rows[f"/world/estimates/{branch}/ellipse"] == -(-samples // 10) + 1, branch
         assert f"/world/estimates/{branch}/path" in static
     for key in ("rmse_position_m", "rmse_heading_rad"):
@@ -92,7 +106,10 @@ def test_run_defaults_write_under_runs(tmp_path):
     done = robotsim("run", "--duration", "1", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     seed = load_scenario("hall").run.seed
-    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [f"hall-seed{seed}.json", f"hall-seed{seed}.rrd"]
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [
+        f"hall-seed{seed}.json",
+        f"hall-seed{seed}.rrd",
+    ]
 
 
 BAD_FILES = {
@@ -108,12 +125,20 @@ def test_bad_scenarios_exit_2_with_one_line_and_no_output(tmp_path, case):
     scenario = tmp_path / "bad.toml"
     if case in BAD_FILES:
         text, key = BAD_FILES[case]
-        scenario.write_text(text + '[robot]\nstart_xy_m = [1.0, 1.0]\n')
+        scenario.write_text(text + "[robot]\nstart_xy_m = [1.0, 1.0]\n")
         expected = f"robotsim: error: {scenario}: {key}: "
     else:
         expected = f"robotsim: error: {scenario}: no such file"
     out = tmp_path / "out"
-    done = robotsim("run", str(scenario), "--rrd", str(out / "x.rrd"), "--summary", str(out / "x.json"), cwd=tmp_path)
+    done = robotsim(
+        "run",
+        str(scenario),
+        "--rrd",
+        str(out / "x.rrd"),
+        "--summary",
+        str(out / "x.json"),
+        cwd=tmp_path,
+    )
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and done.stderr.startswith(expected), done.stderr
     assert not out.exists() or not any(out.iterdir())
@@ -124,7 +149,9 @@ def test_a_failing_output_leaves_no_file(tmp_path):
     summary_dir = tmp_path / "taken"
     summary_dir.mkdir()  # the summary cannot replace a folder: the run fails at the very end
     rrd = tmp_path / "x.rrd"
-    done = robotsim("run", "--duration", "1", "--rrd", str(rrd), "--summary", str(summary_dir), cwd=tmp_path)
+    done = robotsim(
+        "run", "--duration", "1", "--rrd", str(rrd), "--summary", str(summary_dir), cwd=tmp_path
+    )
     assert done.returncode != 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
     assert not any(summary_dir.iterdir())
@@ -135,7 +162,11 @@ def test_a_terminal_gets_a_progress_bar(tmp_path):
     try:
         done = subprocess.run(
             [ROBOTSIM, "run", "--duration", "1", "--rrd", "x.rrd", "--summary", "x.json"],
-            cwd=tmp_path, stdout=subprocess.PIPE, stderr=terminal, text=True, timeout=120,
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=terminal,
+            text=True,
+            timeout=120,
         )
         os.close(terminal)
         terminal = None
@@ -164,14 +195,25 @@ def test_an_output_at_a_folder_is_refused_before_running_and_writes_nothing(tmp_
     folder = tmp_path / "taken"
     folder.mkdir()
     paths = {"--rrd": tmp_path / "x.rrd", "--summary": tmp_path / "x.json", taken: folder}
-    done = robotsim("run", "--duration", "1", "--rrd", str(paths["--rrd"]), "--summary", str(paths["--summary"]), cwd=tmp_path)
+    done = robotsim(
+        "run",
+        "--duration",
+        "1",
+        "--rrd",
+        str(paths["--rrd"]),
+        "--summary",
+        str(paths["--summary"]),
+        cwd=tmp_path,
+    )
     assert done.returncode == 2
     assert done.stderr == f"robotsim: error: {taken}: {folder} exists and is not a file\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"] and not any(folder.iterdir())
 
 
 def test_the_same_file_for_recording_and_summary_is_refused(tmp_path):
-    done = robotsim("run", "--duration", "1", "--rrd", "out.x", "--summary", "./out.x", cwd=tmp_path)
+    done = robotsim(
+        "run", "--duration", "1", "--rrd", "out.x", "--summary", "./out.x", cwd=tmp_path
+    )
     assert done.returncode == 2
     assert done.stderr == "robotsim: error: --summary: same file as --rrd\n"
     assert not any(tmp_path.iterdir())

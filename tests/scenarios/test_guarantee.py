@@ -106,7 +106,9 @@ def test_more_outliers_than_q_are_reported_never_clamped_and_recovered():
     # scan 10: half the belt replaced by random values
     ranges = np.array(log.sonar_range_m)
     ranges[5:7] = 0.3
-    bad = with_outliers(dataclasses.replace(log, sonar_range_m=ranges), 8, np.random.default_rng(0), scans=[10])
+    bad = with_outliers(
+        dataclasses.replace(log, sonar_range_m=ranges), 8, np.random.default_rng(0), scans=[10]
+    )
     estimation, _ = estimate(spec, bad)
     status = estimation.epochs.status
     # tracked set empty: inconsistent; the next epoch searches globally and finds nothing
@@ -127,7 +129,9 @@ def test_more_outliers_than_q_are_reported_never_clamped_and_recovered():
 def test_many_random_outliers_never_crash_nor_clamp_to_nothing():
     spec = load_scenario("hall").with_run(seed=6, duration_s=10.0)
     sonar = dataclasses.replace(spec.sensors.sonar, outlier_prob=0.2)
-    spec = with_estimation(dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, sonar=sonar)), q_max=1)
+    spec = with_estimation(
+        dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, sonar=sonar)), q_max=1
+    )
     log = simulate_spec(spec)
     assert (log.sonar_fault.sum(axis=1) > 1).any()  # more outliers than q_max at some scans
     estimation, _ = estimate(spec, log)
@@ -155,14 +159,18 @@ def test_kidnapping_is_detected_then_relocalised():
     # the fused branch is pulled to the new place at the next epochs; the UKF-only one is not
     truth = result.log.pose[estimation.epoch_index]
     fused_error = np.linalg.norm(estimation.after[at + 1 :, :2] - truth[at + 1 :, :2], axis=1)
-    ukf_error = np.linalg.norm(estimation.pose[0, estimation.epoch_index[at + 1 :], :2] - truth[at + 1 :, :2], axis=1)
+    ukf_error = np.linalg.norm(
+        estimation.pose[0, estimation.epoch_index[at + 1 :], :2] - truth[at + 1 :, :2], axis=1
+    )
     assert fused_error.max() < 0.5 and ukf_error[0] > 4.0 and ukf_error.min() > 1.0
     assert result.summary["empty_epochs"] == 1 and result.summary["lost_epochs"] == 0
     assert result.summary["epoch_status"]["inconsistent"] == 1
 
 
 def test_the_fused_heading_clamp_keeps_the_heading_in_its_interval():
-    spec = with_estimation(load_scenario("hall").with_run(seed=3, duration_s=12.0), fusion="clamp_heading")
+    spec = with_estimation(
+        load_scenario("hall").with_run(seed=3, duration_s=12.0), fusion="clamp_heading"
+    )
     log = simulate_spec(spec)
     estimation, _ = estimate(spec, log)
     check_sound(estimation)
@@ -188,7 +196,10 @@ def test_bad_estimation_settings_exit_2_with_one_line_and_no_output(tmp_path, ca
     scenario = tmp_path / "bad.toml"
     scenario.write_text(f"[robot]\nstart_xy_m = [1.0, 1.0]\n[estimation]\n{line}\n")
     out = tmp_path / "out"
-    assert main(["run", str(scenario), "--rrd", str(out / "x.rrd"), "--summary", str(out / "x.json")]) == 2
+    assert (
+        main(["run", str(scenario), "--rrd", str(out / "x.rrd"), "--summary", str(out / "x.json")])
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith(f"robotsim: error: {scenario}: {key}: ") and err.count("\n") == 1
     assert not out.exists()
@@ -196,9 +207,16 @@ def test_bad_estimation_settings_exit_2_with_one_line_and_no_output(tmp_path, ca
 
 def test_reproduce_ia_fusion_short_run(tmp_path):
     out = tmp_path / "ia"
-    assert main(["reproduce", "ia-fusion", "--duration", "25", "--seed", "1", "--out", str(out)]) == 0
+    assert (
+        main(["reproduce", "ia-fusion", "--duration", "25", "--seed", "1", "--out", str(out)]) == 0
+    )
     table = json.loads((out / "table.json").read_text())
-    for name in ("fig7_ukf_only.png", "fig8_fused_sivia.png", "fig9_fused_imagesp.png", "fig10_box_area.png"):
+    for name in (
+        "fig7_ukf_only.png",
+        "fig8_fused_sivia.png",
+        "fig9_fused_imagesp.png",
+        "fig10_box_area.png",
+    ):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     text = (out / "table.md").read_text()
     assert "| sivia |" in text and "| imagesp |" in text
@@ -223,20 +241,30 @@ def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
     assert guarantee_failure(spec, {"containment": 1.0}) is None
     assert guarantee_failure(spec, {"containment": None}) is None  # no set at all: nothing to judge
     for fault in ("outlier_prob", "lost_echo_prob"):
-        faulty = dataclasses.replace(spec, sensors=dataclasses.replace(
-            spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})))
+        faulty = dataclasses.replace(
+            spec,
+            sensors=dataclasses.replace(
+                spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})
+            ),
+        )
         assert guarantee_failure(faulty, {"containment": 0.96}) is None, fault
     rows = {"sivia": {"containment": 1.0}, "imagesp": {"containment": 0.5}}
     assert missed_guarantee(rows) == "imagesp containment 0.5"
     assert missed_guarantee({"sivia": {"containment": 1.0}}) == ""
 
 
-@pytest.mark.parametrize("experiment", ["iukf-examples", "mukf-example", "motion-models", "ia-fusion"])
+@pytest.mark.parametrize(
+    "experiment", ["iukf-examples", "mukf-example", "motion-models", "ia-fusion"]
+)
 def test_every_reproduction_refuses_a_negative_seed_in_one_line(tmp_path, capsys, experiment):
     out = tmp_path / "out"
     assert main(["reproduce", experiment, "--seed", "-1", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("robotsim: error: ") and "--seed: must be >= 0, got -1" in err and err.count("\n") == 1
+    assert (
+        err.startswith("robotsim: error: ")
+        and "--seed: must be >= 0, got -1" in err
+        and err.count("\n") == 1
+    )
     assert not out.exists()
 
 

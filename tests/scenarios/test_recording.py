@@ -15,7 +15,9 @@ def belt(k: int = 8, radius_m: float = 0.2):
 def test_cone_outlines_reach_the_reading_inside_the_aperture():
     rng = np.random.default_rng(3)
     mount_xy, mount_angle = belt()
-    poses = np.column_stack([rng.uniform(0, 5, 20), rng.uniform(0, 5, 20), rng.uniform(-np.pi, np.pi, 20)])
+    poses = np.column_stack(
+        [rng.uniform(0, 5, 20), rng.uniform(0, 5, 20), rng.uniform(-np.pi, np.pi, 20)]
+    )
     ranges = rng.uniform(0.3, 3.2, (20, 8))
     ranges[rng.random((20, 8)) < 0.3] = np.inf
     gamma, d_max = np.radians(12.5), 3.0
@@ -25,14 +27,19 @@ def test_cone_outlines_reach_the_reading_inside_the_aperture():
     # the apex is the sensor in the world: (x, y) + R(theta) mount
     c, s = np.cos(poses[:, 2, None]), np.sin(poses[:, 2, None])
     apex = np.stack(
-        [poses[:, 0, None] + c * mount_xy[:, 0] - s * mount_xy[:, 1], poses[:, 1, None] + s * mount_xy[:, 0] + c * mount_xy[:, 1]],
+        [
+            poses[:, 0, None] + c * mount_xy[:, 0] - s * mount_xy[:, 1],
+            poses[:, 1, None] + s * mount_xy[:, 0] + c * mount_xy[:, 1],
+        ],
         axis=-1,
     )
     np.testing.assert_allclose(outline[:, :, 0], apex)
     np.testing.assert_allclose(outline[:, :, -1], apex)  # closed
     arc = outline[:, :, 1:-1] - apex[:, :, None]
     reach = np.where(np.isfinite(ranges), ranges, d_max)
-    np.testing.assert_allclose(np.linalg.norm(arc, axis=-1), np.broadcast_to(reach[..., None], arc.shape[:-1]))
+    np.testing.assert_allclose(
+        np.linalg.norm(arc, axis=-1), np.broadcast_to(reach[..., None], arc.shape[:-1])
+    )
     axis = poses[:, 2, None] + mount_angle
     offset = np.angle(np.exp(1j * (np.arctan2(arc[..., 1], arc[..., 0]) - axis[..., None])))
     np.testing.assert_allclose(offset[..., 0], -gamma, atol=1e-9)
@@ -48,7 +55,9 @@ def test_echo_points_lie_on_the_axis_at_the_reading():
     # sensor 0 of pose 0: mount (0.2 at -pi) behind the robot, pointing backwards
     heading = 0.3 + mount_angle[0]
     sensor = np.array([1.0, 2.0]) + 0.2 * np.array([np.cos(heading), np.sin(heading)])
-    np.testing.assert_allclose(points[0], sensor + 1.0 * np.array([np.cos(heading), np.sin(heading)]))
+    np.testing.assert_allclose(
+        points[0], sensor + 1.0 * np.array([np.cos(heading), np.sin(heading)])
+    )
     assert np.isfinite(points).all()
 
 
@@ -116,5 +125,7 @@ def test_same_scenario_and_seed_log_the_same_data(tmp_path):
         if key[0] not in WALL_CLOCK_ENTITIES:
             assert first[key] == second[key], key
         else:  # same rows and times, measured durations
-            assert [(rows, c["time"]) for rows, c in first[key]] == [(rows, c["time"]) for rows, c in second[key]]
+            assert [(rows, c["time"]) for rows, c in first[key]] == [
+                (rows, c["time"]) for rows, c in second[key]
+            ]
     assert first != other_seed  # the comparison sees a change of the sensor noise

@@ -11,16 +11,38 @@ from scenarios.cli import main
 
 def test_iukf_examples_writes_its_table_and_figures(tmp_path, capsys):
     out = tmp_path / "iukf"
-    assert main(["reproduce", "iukf-examples", "--runs", "20", "--steps", "50", "--seed", "3", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "iukf-examples",
+                "--runs",
+                "20",
+                "--steps",
+                "50",
+                "--seed",
+                "3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     table = json.loads((out / "table.json").read_text())
     assert table["runs"] == 20 and table["steps"] == 50
-    for name in ("fig1_example1_x1.png", "fig2_example1_x2.png", "fig3_example2_x1.png", "fig4_example2_x2.png"):
+    for name in (
+        "fig1_example1_x1.png",
+        "fig2_example1_x2.png",
+        "fig3_example2_x1.png",
+        "fig4_example2_x2.png",
+    ):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     md = (out / "table.md").read_text()
     assert "k in -k x2(k)" in md and "| x1 |" in md
 
     ex1, ex2 = (
-        {f: np.array([v["x1"], v["x2"]]) for f, v in table[e]["rmse_time_average"].items()} for e in ("example_1", "example_2")
+        {f: np.array([v["x1"], v["x2"]]) for f, v in table[e]["rmse_time_average"].items()}
+        for e in ("example_1", "example_2")
     )
     for rmse in (ex1, ex2):
         assert set(rmse) == {"EKF", "IEKF", "UKF", "IUKF"}

@@ -19,7 +19,18 @@ from scenarios.reproduce import motion_models as mm_repro
 def short_run(tmp_path_factory):
     """``robotsim reproduce motion-models`` on 60-s drives with 4 runs, through the CLI."""
     out = tmp_path_factory.mktemp("repro") / "motion-models"
-    argv = ["reproduce", "motion-models", "--runs", "4", "--duration", "60", "--seed", "3", "--out", str(out)]
+    argv = [
+        "reproduce",
+        "motion-models",
+        "--runs",
+        "4",
+        "--duration",
+        "60",
+        "--seed",
+        "3",
+        "--out",
+        str(out),
+    ]
     status = cli_main(argv)
     return status, out
 
@@ -34,11 +45,18 @@ def test_outputs_are_written_and_parseable(short_run):
         for errors in drive.values():
             assert set(errors) == {"euclidean", "lateral", "longitudinal"}
             # the Euclidean RMS is the root of the sum of the lateral and longitudinal mean squares
-            assert errors["euclidean"] == pytest.approx(np.hypot(errors["lateral"], errors["longitudinal"]))
+            assert errors["euclidean"] == pytest.approx(
+                np.hypot(errors["lateral"], errors["longitudinal"])
+            )
     assert table["settings"]["sigma_points"]["alpha"] == 1e-5
     md = (out / "table.md").read_text()
     assert "| urban | euclidean |" in md and "| highway | euclidean |" in md
-    for name in ("fig5_cv_ctrv_highway.png", "fig6_ctrv_ctra_highway.png", "fig7_ctra_cca_urban.png", "drives.png"):
+    for name in (
+        "fig5_cv_ctrv_highway.png",
+        "fig6_ctrv_ctra_highway.png",
+        "fig7_ctra_cca_urban.png",
+        "drives.png",
+    ):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(out.parent.glob(".*.part"))
 
@@ -80,8 +98,13 @@ def test_tiny_alpha_agrees_with_a_moderate_alpha():
 
 
 def test_bad_options_get_one_line_errors(tmp_path, capsys):
-    assert cli_main(["reproduce", "motion-models", "--runs", "0", "--out", str(tmp_path / "x")]) == 2
-    assert cli_main(["reproduce", "motion-models", "--duration", "5", "--out", str(tmp_path / "x")]) == 2
+    assert (
+        cli_main(["reproduce", "motion-models", "--runs", "0", "--out", str(tmp_path / "x")]) == 2
+    )
+    assert (
+        cli_main(["reproduce", "motion-models", "--duration", "5", "--out", str(tmp_path / "x")])
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         "robotsim: error: --runs: must be >= 1, got 0",

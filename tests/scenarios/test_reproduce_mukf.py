@@ -11,7 +11,23 @@ from scenarios.cli import main
 
 def test_mukf_example_writes_its_table_and_figures(tmp_path):
     out = tmp_path / "mukf"
-    assert main(["reproduce", "mukf-example", "--runs", "10", "--steps", "100", "--seed", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "mukf-example",
+                "--runs",
+                "10",
+                "--steps",
+                "100",
+                "--seed",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     table = json.loads((out / "table.json").read_text())
     for name in ("fig1_x3_case_a.png", "fig2_x3_case_b.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -75,7 +75,9 @@ def test_the_estimation_figures_agree_with_the_estimates(hall_runs):
     heading = np.angle(np.exp(1j * (est.pose[:, :, 2] - log.pose[None, :, 2])))
     for b, branch in enumerate(BRANCHES):
         assert summary["rmse_position_m"][branch] == pytest.approx(rmse[b])
-        assert summary["rmse_heading_rad"][branch] == pytest.approx(np.sqrt(np.mean(heading[b] ** 2)))
+        assert summary["rmse_heading_rad"][branch] == pytest.approx(
+            np.sqrt(np.mean(heading[b] ** 2))
+        )
     # containment by brute force: the true pose at each scan against each box of the epoch
     inside = [
         any(np.all((box[:, 0] <= pose) & (pose <= box[:, 1])) for box in est.epochs.epoch_boxes(e))
@@ -94,17 +96,33 @@ def test_the_estimation_figures_agree_with_the_estimates(hall_runs):
 def test_the_ukf_only_branch_never_sees_the_boxes(hall_runs):
     # the same dead reckoning without any fusion gives row 0 (up to the rounding of the
     # re-symmetrised covariance at the epochs); row 1 differs
-    from localization.dead_reckoning import DeadReckoning, DeadReckoningSettings, NominalRobot, initial_belief, odometry_data
+    from localization.dead_reckoning import (
+        DeadReckoning,
+        DeadReckoningSettings,
+        NominalRobot,
+        initial_belief,
+        odometry_data,
+    )
     from scenarios.runner import START_POSE_STD, dead_reckoning_noise
 
     run = hall_runs[0]
     spec = load_scenario("hall").with_run(duration_s=20.0)
     robot, noise = spec.robot, dead_reckoning_noise(spec)
-    data = odometry_data(run.log.wheel_ticks, run.log.gyro_rad_s, run.log.accel_m_s2, 0.01,
-                         NominalRobot(robot.wheel_radius_m, robot.wheel_base_m, robot.ticks_per_rev), noise)
-    alone = DeadReckoning(data, initial_belief(spec.start_pose, START_POSE_STD, noise), DeadReckoningSettings())
+    data = odometry_data(
+        run.log.wheel_ticks,
+        run.log.gyro_rad_s,
+        run.log.accel_m_s2,
+        0.01,
+        NominalRobot(robot.wheel_radius_m, robot.wheel_base_m, robot.ticks_per_rev),
+        noise,
+    )
+    alone = DeadReckoning(
+        data, initial_belief(spec.start_pose, START_POSE_STD, noise), DeadReckoningSettings()
+    )
     alone.run(data.count - 1)
-    np.testing.assert_allclose(run.estimation.pose[0], alone.history.mean[:, 0, :3], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        run.estimation.pose[0], alone.history.mean[:, 0, :3], rtol=0, atol=1e-6
+    )
     assert np.abs(run.estimation.pose[1] - alone.history.mean[:, 1, :3]).max() > 1e-3
 
 
@@ -112,7 +130,9 @@ def test_an_interval_error_at_run_time_is_reported_against_the_estimation_table(
     """Settings the spec cannot catch (here built by hand past its validation) fail with the
     scenario's file and the ``estimation`` key, not an unlocated interval message."""
     spec = load_scenario("hall").with_run(duration_s=1.0)
-    broken = dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, heading_scale_m_per_rad=np.inf))
+    broken = dataclasses.replace(
+        spec, estimation=dataclasses.replace(spec.estimation, heading_scale_m_per_rad=np.inf)
+    )
     with pytest.raises(ScenarioError) as refusal:
         run_scenario(broken)
     assert refusal.value.source == spec.source and refusal.value.key == "estimation"

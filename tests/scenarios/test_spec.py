@@ -14,7 +14,14 @@ from robotsim.robot import RobotParams
 from robotsim.sensors.imu import GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.errors import ScenarioError
-from scenarios.spec import MAX_SAMPLES, STAND_STILL, EstimationSpec, builtin_names, load_scenario, parse_scenario
+from scenarios.spec import (
+    MAX_SAMPLES,
+    STAND_STILL,
+    EstimationSpec,
+    builtin_names,
+    load_scenario,
+    parse_scenario,
+)
 
 BASE = """
 [map]
@@ -78,7 +85,11 @@ cruise_speed_m_s = 0.5
 loop = false
 """
     )
-    assert spec.run.rate_hz == pytest.approx(50.0) and spec.run.dt_s == pytest.approx(0.02) and spec.run.seed == 7
+    assert (
+        spec.run.rate_hz == pytest.approx(50.0)
+        and spec.run.dt_s == pytest.approx(0.02)
+        and spec.run.seed == 7
+    )
     assert spec.start_pose[2] == pytest.approx(math.pi / 2)
     assert spec.robot.wheel_radius_m == 0.06  # "radius" is not a radian key
     assert spec.robot.v_max_m_s == 0.8 and spec.robot.omega_max_rad_s == pytest.approx(math.pi / 2)
@@ -107,7 +118,9 @@ omega_deg_s = 45
 
 
 def test_a_custom_sonar_belt_in_degrees():
-    spec = parse(BASE + "[sensors.sonar]\nmount_xy = [[0.2, 0.0], [0.0, 0.2]]\nmount_angle_deg = [0, 90]\n")
+    spec = parse(
+        BASE + "[sensors.sonar]\nmount_xy = [[0.2, 0.0], [0.0, 0.2]]\nmount_angle_deg = [0, 90]\n"
+    )
     assert spec.sensors.sonar.count == 2
     np.testing.assert_allclose(spec.sensors.sonar.mount_angle_rad, [0.0, math.pi / 2])
     error = refused(BASE + "[sensors.sonar]\nmount_xy = [[0.2, 0.0], [0.0, 0.2]]\n")
@@ -136,12 +149,20 @@ BAD = {
     "unknown table": ("[sensor.sonar]\nd_max_m = 3\n", "sensor", "unknown key"),
     "unknown sensor key": ("[sensors.gyro]\nbias = 1.0\n", "sensors.gyro.bias", "unknown key"),
     "negative rate": ("[run]\nrate_hz = -100\n", "run.rate_hz", "must be > 0"),
-    "negative sonar rate": ("[sensors.sonar]\nrate_hz = -1\n", "sensors.sonar.rate_hz", "must be > 0"),
+    "negative sonar rate": (
+        "[sensors.sonar]\nrate_hz = -1\n",
+        "sensors.sonar.rate_hz",
+        "must be > 0",
+    ),
     "NaN duration": ("[run]\nduration_s = nan\n", "run.duration_s", "finite"),
     "infinite speed": ("[robot]\nv_max_m_s = inf\n", "robot.v_max_m_s", "finite"),
     "d_max zero": ("[sensors.sonar]\nd_max_m = 0\n", "sensors.sonar.d_max_m", "must be > 0"),
     "v_max negative": ("[robot]\nv_max_m_s = -1.0\n", "robot.v_max_m_s", "must be > 0"),
-    "probability above one": ("[sensors.sonar]\noutlier_prob = 1.5\n", "sensors.sonar.outlier_prob", "<= 1"),
+    "probability above one": (
+        "[sensors.sonar]\noutlier_prob = 1.5\n",
+        "sensors.sonar.outlier_prob",
+        "<= 1",
+    ),
     "wrong type": ('[run]\nseed = "one"\n', "run.seed", "must be an integer"),
     "float seed": ("[run]\nseed = 1.5\n", "run.seed", "must be an integer"),
     "rate and dt": ("[run]\nrate_hz = 50\ndt_s = 0.02\n", "run.dt_s", "not both"),
@@ -150,26 +171,76 @@ BAD = {
         "sensors.sonar.half_aperture_deg",
         "not both",
     ),
-    "estimation filter": ("[estimation]\nfilter = 'pf'\n", "estimation.filter", "must be one of 'ukf'"),
-    "estimation tracker": ("[estimation]\ntracker = 'kalman'\n", "estimation.tracker", "'sivia', 'imagesp'"),
+    "estimation filter": (
+        "[estimation]\nfilter = 'pf'\n",
+        "estimation.filter",
+        "must be one of 'ukf'",
+    ),
+    "estimation tracker": (
+        "[estimation]\ntracker = 'kalman'\n",
+        "estimation.tracker",
+        "'sivia', 'imagesp'",
+    ),
     "estimation fusion": ("[estimation]\nfusion = 'average'\n", "estimation.fusion", "'clamp'"),
     "estimation eps": ("[estimation]\neps_m = 0\n", "estimation.eps_m", "must be >= 0.001"),
-    "estimation eps tiny": ("[estimation]\neps_m = 1e-300\n", "estimation.eps_m", "must be >= 0.001"),
+    "estimation eps tiny": (
+        "[estimation]\neps_m = 1e-300\n",
+        "estimation.eps_m",
+        "must be >= 0.001",
+    ),
     "estimation q_max negative": ("[estimation]\nq_max = -1\n", "estimation.q_max", "must be >= 0"),
-    "estimation q_max too large": ("[estimation]\nq_max = 17\n", "estimation.q_max", "less than the number of sonars (16)"),
-    "estimation q_max every sonar": ("[estimation]\nq_max = 16\n", "estimation.q_max", "constrains nothing"),
+    "estimation q_max too large": (
+        "[estimation]\nq_max = 17\n",
+        "estimation.q_max",
+        "less than the number of sonars (16)",
+    ),
+    "estimation q_max every sonar": (
+        "[estimation]\nq_max = 16\n",
+        "estimation.q_max",
+        "constrains nothing",
+    ),
     "too many samples (rate)": ("[run]\nrate_hz = 1e9\n", "run.rate_hz", "more than the 1e+07"),
     "too many samples (dt)": ("[run]\ndt_s = 1e-9\n", "run.dt_s", "more than the 1e+07"),
-    "too many samples (duration)": ("[run]\nduration_s = 1e300\n", "run.duration_s", "more than the 1e+07"),
-    "sonar faster than the simulation": (
-        "[run]\nrate_hz = 10\n[sensors.sonar]\nrate_hz = 20\n", "sensors.sonar.rate_hz", "faster than the simulation"
+    "too many samples (duration)": (
+        "[run]\nduration_s = 1e300\n",
+        "run.duration_s",
+        "more than the 1e+07",
     ),
-    "sonar off the sample beat": ("[sensors.sonar]\nrate_hz = 3\n", "sensors.sonar.rate_hz", "whole number"),
-    "estimation rate": ("[estimation]\ninterval_rate_hz = 0.3\n", "estimation.interval_rate_hz", "whole number"),
-    "estimation rate above sonar": ("[estimation]\ninterval_rate_hz = 2\n", "estimation.interval_rate_hz", "whole number"),
-    "estimation pitch": ("[estimation]\nimagesp_pitch_m = 0.01\n", "estimation.imagesp_pitch_m", ">= eps_m"),
-    "estimation guaranteed": ("[estimation]\nguaranteed = 'yes'\n", "estimation.guaranteed", "true or false"),
-    "estimation ray test": ("[estimation]\nray_test = 'auto'\n", "estimation.ray_test", "true or false"),
+    "sonar faster than the simulation": (
+        "[run]\nrate_hz = 10\n[sensors.sonar]\nrate_hz = 20\n",
+        "sensors.sonar.rate_hz",
+        "faster than the simulation",
+    ),
+    "sonar off the sample beat": (
+        "[sensors.sonar]\nrate_hz = 3\n",
+        "sensors.sonar.rate_hz",
+        "whole number",
+    ),
+    "estimation rate": (
+        "[estimation]\ninterval_rate_hz = 0.3\n",
+        "estimation.interval_rate_hz",
+        "whole number",
+    ),
+    "estimation rate above sonar": (
+        "[estimation]\ninterval_rate_hz = 2\n",
+        "estimation.interval_rate_hz",
+        "whole number",
+    ),
+    "estimation pitch": (
+        "[estimation]\nimagesp_pitch_m = 0.01\n",
+        "estimation.imagesp_pitch_m",
+        ">= eps_m",
+    ),
+    "estimation guaranteed": (
+        "[estimation]\nguaranteed = 'yes'\n",
+        "estimation.guaranteed",
+        "true or false",
+    ),
+    "estimation ray test": (
+        "[estimation]\nray_test = 'auto'\n",
+        "estimation.ray_test",
+        "true or false",
+    ),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -177,9 +248,15 @@ BAD = {
         "unsound",
     ),
     "profile too fast": (
-        "[[route.profile]]\nduration_s = 1\nv_m_s = 9.0\n", "route.profile[0].v_m_s", "must be <="
+        "[[route.profile]]\nduration_s = 1\nv_m_s = 9.0\n",
+        "route.profile[0].v_m_s",
+        "must be <=",
     ),
-    "waypoint outside": ("[route]\nwaypoints_m = [[2, 2], [12, 2]]\n", "route.waypoints_m[1]", "outside"),
+    "waypoint outside": (
+        "[route]\nwaypoints_m = [[2, 2], [12, 2]]\n",
+        "route.waypoints_m[1]",
+        "outside",
+    ),
     "run not a table": ("run = 5\n", "run", "must be a table"),
 }
 
@@ -216,7 +293,13 @@ def test_estimation_defaults_and_values():
         "free_space = false\nray_test = true\n"
     )
     est = parse(BASE + text).estimation
-    assert (est.filter, est.tracker, est.fusion, est.eps_m, est.q_max) == ("iekf", "imagesp", "clamp_heading", 0.1, 3)
+    assert (est.filter, est.tracker, est.fusion, est.eps_m, est.q_max) == (
+        "iekf",
+        "imagesp",
+        "clamp_heading",
+        0.1,
+        3,
+    )
     assert est.scan_stride(4.0) == 4 and est.free_space is False and est.guaranteed is False
     assert est.ray_test is True and spec.estimation.ray_test is None  # absent: by the aperture
 
@@ -282,7 +365,9 @@ def test_the_sample_limit_and_the_sonar_beat_admit_the_edges():
     assert at_limit.run.duration_s * at_limit.run.rate_hz == MAX_SAMPLES
     same_rate = parse(BASE + "[run]\nrate_hz = 10\n[sensors.sonar]\nrate_hz = 10\n")
     assert same_rate.sensors.sonar.rate_hz == same_rate.run.rate_hz
-    assert parse(BASE + "[sensors.sonar]\nrate_hz = 4\n").sensors.sonar.rate_hz == 4.0  # 25 samples a scan
+    assert (
+        parse(BASE + "[sensors.sonar]\nrate_hz = 4\n").sensors.sonar.rate_hz == 4.0
+    )  # 25 samples a scan
     assert parse(BASE + "[estimation]\nq_max = 15\neps_m = 1e-3\n").estimation.q_max == 15
 
 
@@ -290,7 +375,10 @@ def test_the_sample_limit_and_the_sonar_beat_admit_the_edges():
     ("name", "text"),
     [
         ("room.wkt", "MULTILINESTRING ((0 0, 6 0, 6 5), (6 5, 0 5, 0 0))"),
-        ("room.geojson", '{"type": "LineString", "coordinates": [[0, 0], [6, 0], [6, 5], [0, 5], [0, 0]]}'),
+        (
+            "room.geojson",
+            '{"type": "LineString", "coordinates": [[0, 0], [6, 0], [6, 5], [0, 5], [0, 0]]}',
+        ),
     ],
 )
 def test_a_room_of_line_strings_has_an_outer_wall_for_the_start_and_waypoints(tmp_path, name, text):
@@ -300,7 +388,9 @@ def test_a_room_of_line_strings_has_an_outer_wall_for_the_start_and_waypoints(tm
     with pytest.raises(ScenarioError) as info:
         load_scenario(scenario)
     assert info.value.key == "robot.start_xy_m" and "outside" in info.value.reason
-    scenario.write_text(f'[map]\nfile = "{name}"\n[robot]\nstart_xy_m = [3, 2]\n[route]\nwaypoints_m = [[3, 2], [8, 2]]\n')
+    scenario.write_text(
+        f'[map]\nfile = "{name}"\n[robot]\nstart_xy_m = [3, 2]\n[route]\nwaypoints_m = [[3, 2], [8, 2]]\n'
+    )
     with pytest.raises(ScenarioError) as info:
         load_scenario(scenario)
     assert info.value.key == "route.waypoints_m[1]" and "outside" in info.value.reason
