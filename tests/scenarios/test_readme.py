@@ -1,5 +1,5 @@
-"""The README's scenario documentation: its example parses and runs, and its key tables list
-every parameter with the default the code really uses."""
+"""The scenario documentation (docs/scenario-format.md): its example parses and runs, and its
+key tables list every parameter with the default the code really uses."""
 
 from __future__ import annotations
 
@@ -18,11 +18,11 @@ from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.runner import run_scenario
 from scenarios.spec import EstimationSpec, RunSpec, parse_scenario
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+FORMAT_DOC = Path(__file__).resolve().parents[2] / "docs" / "scenario-format.md"
 
 
 def format_section() -> str:
-    text = README.read_text(encoding="utf-8")
+    text = FORMAT_DOC.read_text(encoding="utf-8")
     start = text.index("## Scenario file format")
     end = text.find("\n## ", start + 1)
     return text[start : end if end > 0 else None]
@@ -44,7 +44,7 @@ def key_tables() -> dict[str, dict[str, str]]:
 
 def test_the_example_parses_and_runs():
     example = re.search(r"```toml\n(.*?)```", format_section(), re.S).group(1)
-    spec = parse_scenario(example, source="README.md")
+    spec = parse_scenario(example, source="docs/scenario-format.md")
     assert spec.run.seed == 7 and spec.sensors.sonar.outlier_prob == 0.02
     assert spec.map.boundary is not None  # the inline outer wall was recognised
     assert isinstance(spec.plan, Route) and spec.plan.loop
