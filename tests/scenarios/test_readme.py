@@ -86,3 +86,78 @@ def test_every_parameter_is_documented_with_its_true_default(table):
             assert float(written) == pytest.approx(value, rel=1e-3), key
         checked += 1
     assert checked >= len(fields) // 2
+
+
+# ---------------------------------------------------------------------------------------
+# The README and the docs/ pages as a whole
+# ---------------------------------------------------------------------------------------
+ROOT = Path(__file__).resolve().parents[2]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+CODE_PACKAGES = ("robotsim", "localization", "intervals", "scenarios", "benchmarks")
+
+
+def test_the_readme_is_short_and_keeps_the_commands_ci_runs():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 150
+    # .ci/run installs and tests exactly as these blocks say
+    assert "```sh\npip install .\nrobotsim run\n```" in text
+    assert '```sh\npip install ".[test]"\npytest\n```' in text
+    assert 'pip install ".[dev]"' in text and "pre-commit install" in text
+
+
+def _anchor(heading: str) -> str:
+    """The anchor GitHub gives a markdown heading (lower case, punctuation dropped)."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_relative_link_of_the_pages_resolves():
+    checked = 0
+    for page in PAGES:
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text(encoding="utf-8")):
+            if target.startswith(("http://", "https://")):
+                continue
+            path_part, _, anchor = target.partition("#")
+            linked = (page.parent / path_part).resolve() if path_part else page
+            assert linked.is_file(), f"{page.name}: broken link {target}"
+            if anchor and linked.suffix == ".md":
+                headings = re.findall(r"^#+ (.+)$", linked.read_text(encoding="utf-8"), re.M)
+                assert anchor in {_anchor(h) for h in headings}, f"{page.name}: no #{anchor}"
+            checked += 1
+    assert checked > 20
+
+
+def _code_text() -> str:
+    files = [p for package in CODE_PACKAGES for p in (ROOT / package).rglob("*.py")]
+    return "\n".join(p.read_text(encoding="utf-8") for p in files)
+
+
+def test_every_paper_the_code_cites_is_named_in_the_references():
+    cited = set(re.findall(r"[Pp]aper (00\d)", _code_text()))
+    assert {"000", "001", "002", "004"} <= cited
+    references = (ROOT / "docs" / "references.md").read_text(encoding="utf-8")
+    for number in cited:
+        row = re.search(rf"^\| \*\*paper {number}\*\* \| ([^|]+) \|", references, re.M)
+        assert row, f"paper {number} is cited in the code but not named in docs/references.md"
+        assert '"' in row.group(1) and re.search(r"\b(19|20)\d\d\b", row.group(1)), row.group(1)
+
+
+def test_every_models_section_the_code_cites_exists():
+    sections = {int(n) for n in re.findall(r"MODELS\.md sections? (\d)", _code_text())}
+    sections |= {int(b) for a, b in re.findall(r"MODELS\.md sections (\d)-(\d)", _code_text())}
+    assert sections
+    models = (ROOT / "docs" / "models.md").read_text(encoding="utf-8")
+    for n in sorted(sections):
+        assert re.search(rf"^## {n}\. ", models, re.M), (
+            f"MODELS.md section {n} is not in docs/models.md"
+        )
+
+
+def test_the_interval_example_runs_and_holds_the_truth():
+    text = (ROOT / "docs" / "guarantee.md").read_text(encoding="utf-8")
+    section = text[text.index("## 8. Using the package") :]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    namespace: dict = {}
+    exec(compile(code.replace("print(", "_ = ("), "docs/guarantee.md", "exec"), namespace)
+    paving, truth = namespace["paving"], namespace["truth"]
+    assert paving.contains(truth[None]).all()
+    assert 0.0 < paving.area_xy() < 0.1  # one scan narrows the whole hall to a small set
