@@ -13,7 +13,9 @@ MODELS_DOC = Path(__file__).resolve().parents[2] / "docs" / "models.md"
 def test_the_filter_example_runs():
     text = MODELS_DOC.read_text(encoding="utf-8")
     section = text[text.index("## 6. The Kalman filter family") :]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    found = re.search(r"```python\n(.*?)```", section, re.S)
+    assert found, "no python block in section 6 of docs/models.md"
+    code = found.group(1)
     namespace: dict = {}
     exec(compile(code, "docs/models.md", "exec"), namespace)
     belief = namespace["belief"]

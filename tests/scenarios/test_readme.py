@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -42,8 +43,15 @@ def key_tables() -> dict[str, dict[str, str]]:
     return tables
 
 
+def _block(language: str, text: str) -> str:
+    """The first fenced code block of ``language`` in ``text``."""
+    found = re.search(rf"```{language}\n(.*?)```", text, re.S)
+    assert found, f"no {language} block"
+    return found.group(1)
+
+
 def test_the_example_parses_and_runs():
-    example = re.search(r"```toml\n(.*?)```", format_section(), re.S).group(1)
+    example = _block("toml", format_section())
     spec = parse_scenario(example, source="docs/scenario-format.md")
     assert spec.run.seed == 7 and spec.sensors.sonar.outlier_prob == 0.02
     assert spec.map.boundary is not None  # the inline outer wall was recognised
@@ -53,10 +61,10 @@ def test_the_example_parses_and_runs():
     assert result.summary["distance_m"] > 2.0
 
 
-DOCUMENTED = {
+DOCUMENTED: dict[str, Any] = {
     "[run]": RunSpec(),
     "[robot]": RobotParams(),
-    "[route]": Route(waypoints_m=[[0.0, 0.0]]),
+    "[route]": Route(waypoints_m=np.zeros((1, 2))),
     "[sensors.encoders]": EncoderParams(),
     "[sensors.gyro]": GyroParams(),
     "[sensors.accelerometer]": AccelerometerParams(),
@@ -155,7 +163,7 @@ def test_every_models_section_the_code_cites_exists():
 def test_the_interval_example_runs_and_holds_the_truth():
     text = (ROOT / "docs" / "guarantee.md").read_text(encoding="utf-8")
     section = text[text.index("## 8. Using the package") :]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    code = _block("python", section)
     namespace: dict = {}
     exec(compile(code.replace("print(", "_ = ("), "docs/guarantee.md", "exec"), namespace)
     paving, truth = namespace["paving"], namespace["truth"]
