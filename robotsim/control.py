@@ -205,7 +205,9 @@ class ScriptedController:
 
     def __init__(self, profile: ScriptedProfile) -> None:
         self._t = profile.t_s.tolist()
-        self._commands = list(zip(profile.v_m_s.tolist(), profile.omega_rad_s.tolist()))
+        self._commands = list(
+            zip(profile.v_m_s.tolist(), profile.omega_rad_s.tolist(), strict=True)
+        )
 
     def command(self, t_s: float, x_m: float, y_m: float, theta_rad: float) -> tuple[float, float]:
         """The profile's ``(v_m_s, omega_rad_s)`` at ``t_s``."""

@@ -77,7 +77,7 @@ def test_jacobian_kernels_match_the_numpy_jacobians(name):
     reference = motion.jacobian(states, DT_S)
     out = np.empty((motion.n, motion.n))
     args = np.array([DT_S])
-    for state, expected in zip(states, reference):
+    for state, expected in zip(states, reference, strict=True):
         out[:] = np.nan
         motion.jacobian_point(state, args, out)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-13 * np.abs(expected).max())
@@ -154,7 +154,10 @@ def test_a_filter_run_matches_the_numpy_filter(name):
         beliefs = [
             EKF.update(EKF.predict(b, p, DT_S), z, mm)
             for b, p, mm in zip(
-                beliefs, (process, numpy_twin(process)), (measurement, numpy_twin(measurement))
+                beliefs,
+                (process, numpy_twin(process)),
+                (measurement, numpy_twin(measurement)),
+                strict=True,
             )
         ]
     assert_close(*beliefs)
@@ -198,7 +201,7 @@ def test_non_finite_inputs_fall_back_with_the_numpy_errors():
     assert not takes_compiled_path(broken, compiled, DT_S)
     for model in (compiled, numpy_twin(compiled)):
         with pytest.raises(
-            EstimationError, match="EKF predict: the predicted mean .* is not finite"
+            EstimationError, match=r"EKF predict: the predicted mean .* is not finite"
         ):
             EKF.predict(broken, model, DT_S)
     z = np.zeros((3, 3))
@@ -299,7 +302,7 @@ def test_kernels_that_do_not_fit_give_one_clear_error():
     ):
         EKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, 0.5, DT_S)
     with pytest.raises(
-        EstimationError, match="jacobian_point must be a numba.njit-compiled function"
+        EstimationError, match=r"jacobian_point must be a numba\.njit-compiled function"
     ):
         MeasurementModel(lambda x: x, np.eye(2), jacobian_point=lambda x, args, out: None)
 

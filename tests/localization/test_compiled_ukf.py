@@ -257,7 +257,7 @@ def test_kernel_that_does_not_fit_gives_one_clear_error():
         EstimationError, match="UKF predict: the kernel two_arguments does not compile"
     ):
         UKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, DT_S)
-    with pytest.raises(EstimationError, match="point must be a numba.njit-compiled function"):
+    with pytest.raises(EstimationError, match=r"point must be a numba\.njit-compiled function"):
         MeasurementModel(lambda x: x, np.eye(2), point=lambda x, args, out: None)
 
 

@@ -386,7 +386,7 @@ def test_a_mean_that_is_not_finite_is_refused_naming_the_sample(route_logs, name
     accel = np.array(data.accel_input_m_s2)
     accel[40] = np.nan  # past odometry_data's checks: OdometryData built by hand
     broken = dataclasses.replace(data, accel_input_m_s2=accel)
-    with pytest.raises(EstimationError, match="at sample 40 .* the mean not finite"):
+    with pytest.raises(EstimationError, match=r"at sample 40 .* the mean not finite"):
         DeadReckoning(
             broken, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)
         ).run(60)
@@ -428,7 +428,7 @@ def long_hall_runs():
 def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_raw_gyro(
     long_hall_runs,
 ):
-    spec, logs, noise, history = long_hall_runs
+    spec, logs, _, history = long_hall_runs
     gyro = logs[0].sensors.gyro
     for b, log in enumerate(logs):
         t = log.t_s

@@ -69,7 +69,7 @@ def test_bias_random_walk_variance_grows_linearly(kind, walk):
     runs = 4000
     samples = 1001  # 10 s
     truth = np.zeros((samples, runs, 2)) if kind == "accel" else np.zeros((samples, runs))
-    measured, bias = simulate(kind, truth, 3, walk=walk)
+    _, bias = simulate(kind, truth, 3, walk=walk)
     assert np.all(bias[0] == 0.0)
     for t_s in (2.5, 10.0):
         spread = bias[int(t_s * RATE_HZ)].ravel()
