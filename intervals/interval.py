@@ -46,11 +46,13 @@ widens the result); it dominates the float error of locating ``k pi`` for ``|x| 
 _TWO_PI = 2.0 * np.pi
 
 
-def _down(x: np.ndarray) -> np.ndarray:
+def _down(x: np.ndarray | float) -> np.ndarray:
+    """The float one ulp below each entry of ``x`` (an outward rounding of a lower bound)."""
     return np.nextafter(x, -np.inf)
 
 
-def _up(x: np.ndarray) -> np.ndarray:
+def _up(x: np.ndarray | float) -> np.ndarray:
+    """The float one ulp above each entry of ``x`` (an outward rounding of an upper bound)."""
     return np.nextafter(x, np.inf)
 
 

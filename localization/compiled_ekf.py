@@ -302,8 +302,8 @@ def predict_entry(point, jacobian_point) -> tuple:
 def update_entry(point, jacobian_point):
     """The compiled update entry of the kernels ``(h, H)`` (as :func:`predict_entry`)."""
     key = (point, jacobian_point)
-    entry = UPDATE_ENTRIES.get(key)
-    if entry is None:
+    found = UPDATE_ENTRIES.get(key)
+    if found is None:
 
         @numba.njit
         def entry(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
@@ -321,14 +321,16 @@ def update_entry(point, jacobian_point):
                 out_cov,
             )
 
-        UPDATE_ENTRIES[key] = entry
-    return entry
+        found = UPDATE_ENTRIES[key] = entry
+    return found
 
 
 # -------------------------------------------------------------------------- the Python side
 
 
-def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple):
+def predict(
+    mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``model`` is an additive-noise :class:`~localization.models.ProcessModel` with both
@@ -364,7 +366,7 @@ def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], m
 
 def update(
     mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``

@@ -443,8 +443,8 @@ def predict_entry(point, augmented: bool) -> tuple:
 
 def update_entry(point):
     """The compiled update entry of the measurement kernel ``point`` (as :func:`predict_entry`)."""
-    entry = UPDATE_ENTRIES.get(point)
-    if entry is None:
+    found = UPDATE_ENTRIES.get(point)
+    if found is None:
 
         @numba.njit
         def entry(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
@@ -452,8 +452,8 @@ def update_entry(point):
                 point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
             )
 
-        UPDATE_ENTRIES[point] = entry
-    return entry
+        found = UPDATE_ENTRIES[point] = entry
+    return found
 
 
 # -------------------------------------------------------------------------- the Python side
@@ -576,7 +576,7 @@ def runs_of(mean: np.ndarray) -> int:
 
 def predict(
     weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``weights`` are the :class:`~localization.sigma_points.SigmaWeights` of the state (or of
@@ -622,7 +622,7 @@ def update(
     z,
     model,
     args: tuple,
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``

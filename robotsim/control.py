@@ -100,6 +100,8 @@ class PurePursuit:
     def _point(self, index: int) -> tuple[float, float]:
         """Path point ``index``: 0 is the start, then the waypoints (cycling if looping)."""
         if index == 0:
+            if self._start is None:  # set from the pose of the first command()
+                raise RuntimeError("PurePursuit: the path has no start before the first command")
             return self._start
         count = len(self._waypoints)
         return self._waypoints[
