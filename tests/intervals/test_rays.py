@@ -72,6 +72,7 @@ def _case(rng, gamma, echoes_never_lost):
     return SonarScan(segments, belt, readings, outer), params, truth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_boxes_holding_the_truth_are_never_rejected(gamma):
     """3 x 200 cases x 40 boxes, no-echo readings used as free space in half of them; whole
@@ -95,6 +96,7 @@ def test_boxes_holding_the_truth_are_never_rejected(gamma):
         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_every_pose_of_a_rejected_box_disagrees_with_the_rejecting_sensor(gamma):
     """Brute force on boxes near the truth: 64 poses (corners and random) per rejected box."""
@@ -128,6 +130,7 @@ def _shifted(truth, rng, count, half):
     return np.stack([centre - half, centre + half], axis=-1)
 
 
+@pytest.mark.slow
 def test_most_boxes_away_from_the_truth_are_rejected_by_a_thin_cone():
     rng = np.random.default_rng(3)
     rejected = total = 0
@@ -256,6 +259,7 @@ def test_sub_boxes_cover_the_box_exactly():
         assert np.array_equal(ends[:, 1:, 0], ends[:, :-1, 1])
 
 
+@pytest.mark.slow
 def test_joint_test_rejects_what_no_single_sensor_can():
     """Heading pieces each rejected by a different sensor: the joint test rejects the box,
     the per-sensor test cannot; and ``other`` rejections count in every piece."""
@@ -288,6 +292,7 @@ def test_joint_test_rejects_what_no_single_sensor_can():
     assert not joint_rejections(boxes[:10], scan, 16, (1, 1, 4), other=everything).any()
 
 
+@pytest.mark.slow
 def test_compiled_engine_matches_the_numpy_reference():
     """Same verdicts on random cases, thin and wide cones, with edge cases: degenerate and
     unbounded boxes, headings at +-pi and far beyond, boxes wider than the room."""

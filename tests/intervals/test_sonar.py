@@ -67,6 +67,7 @@ def test_q_relaxation_keeps_the_truth_with_k_outliers():
         assert np.all(box_test(boxes, scan, q=k) != OUTSIDE)
 
 
+@pytest.mark.slow
 def test_inner_boxes_hold_only_consistent_poses():
     """Inner boxes from SIVIA (inner test on): 200 poses sampled in each are consistent."""
     rng = np.random.default_rng(8)

@@ -101,6 +101,7 @@ def _case(rng):
     return scan, np.concatenate([near, away, _special_boxes(truth, rng)])
 
 
+@pytest.mark.slow
 def test_compiled_verdicts_equal_the_numpy_reference():
     """200 random cases x 180 boxes: per-sensor reject / certain and the box verdicts at
     q = 0..3 agree everywhere; the cases reach every kind of reading and verdict."""

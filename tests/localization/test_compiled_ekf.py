@@ -263,6 +263,7 @@ def damped_jacobian(x, k, dt_s):
     return diagonal[..., None] * np.eye(x.shape[-1])
 
 
+@pytest.mark.slow
 def test_user_kernels_are_compiled_once_and_match(assert_close):
     compiled = ProcessModel(
         damped,

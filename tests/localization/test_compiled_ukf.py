@@ -204,6 +204,7 @@ def damped(x, k, dt_s):
     return x * np.exp(-np.asarray(k)[..., None] * dt_s) + np.sin(x) * dt_s
 
 
+@pytest.mark.slow
 def test_user_kernel_is_compiled_once_and_matches(assert_close):
     compiled = ProcessModel(damped, 0.01 * np.eye(3), point=damped_point)
     belief = Gaussian(

@@ -64,6 +64,7 @@ def test_turn_on_bias_is_constant_in_a_run_and_spread_as_declared(kind, std):
     assert abs(spread.mean()) < 4 * std / np.sqrt(spread.size)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("kind", "walk"), [("gyro", 3e-5), ("accel", 5e-4)])
 def test_bias_random_walk_variance_grows_linearly(kind, walk):
     runs = 4000

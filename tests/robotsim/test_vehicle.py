@@ -166,6 +166,7 @@ def test_bad_settings_are_refused_with_a_clear_message():
         )
 
 
+@pytest.mark.slow
 def test_robotsim_vehicle_does_not_import_localization():
     code = (
         "import sys, robotsim.vehicle.drives, robotsim.vehicle.sensors; "
