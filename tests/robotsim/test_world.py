@@ -67,8 +67,8 @@ def test_robot_driven_into_a_wall_stops_at_it(heading):
 def test_wall_contact_callback_fires_only_while_the_robot_touches_a_wall():
     # hall: east wall at x = 10; driven east from x = 9, then stopped after 3 s
     world = World(builtin_map("hall"), ROBOT, (9.0, 3.5, 0.0))
-    contacts: set[int] = set()
-    world.on_wall_contact(lambda: contacts.add(step))
+    contacts: list[int] = []  # the step of each solved contact
+    world.on_wall_contact(lambda: contacts.append(step))
     gap_m = []  # distance from the disk's edge (plus the wall's radius) to the wall, per step
     for step in range(400):
         world.step(0.5 if step < 300 else 0.0, 0.0)
@@ -76,7 +76,12 @@ def test_wall_contact_callback_fires_only_while_the_robot_touches_a_wall():
     assert contacts
     first = min(contacts)
     assert gap_m[first] < 2e-3 and min(gap_m[: first - 1]) > 1e-3  # at the wall, not before
-    assert set(range(first, 300)) <= contacts  # every step while driven into it
+    assert set(range(first, 300)) <= set(contacts)  # every step while driven into it
+    replaced: list[None] = []
+    world.on_wall_contact(lambda: replaced.append(None))  # a later callback replaces the first
+    count = len(contacts)
+    world.step(0.5, 0.0)  # driven into the wall again
+    assert replaced and len(contacts) == count
     free = World(builtin_map("hall"), ROBOT, (5.0, 3.5, 0.0))
     free_contacts: list[None] = []
     free.on_wall_contact(lambda: free_contacts.append(None))
