@@ -19,7 +19,8 @@ documented extension point) with ``F`` set to the CTRV Jacobian before each pred
 Our UKF and EKF are timed on both of their paths, side by side: ``ukf`` and ``ekf`` are the
 compiled paths (the models built with their per-point kernels, ``CTRV.process_model(Q)`` and
 ``pose_model(R)``, see ``localization.compiled_ukf`` and ``localization.compiled_ekf``),
-``ukf numpy`` and ``ekf numpy`` the numpy paths (the same functions without kernels). Order of work: (1) every filter of ours must give filterpy's estimates (means and
+``ukf numpy`` and ``ekf numpy`` the numpy paths (the same functions without kernels).
+Order of work: (1) every filter of ours must give filterpy's estimates (means and
 covariances, every step of ``--filterpy-runs`` runs, tolerance :data:`TOLERANCE`), and our
 batched filter the runs' own one-run estimates; the script exits 1 otherwise. (2) Timing, best
 of ``--repeats``: one filter, microseconds per step (predict + update) and the ratio filterpy /
@@ -39,6 +40,7 @@ import io
 import math
 import pstats
 import sys
+from functools import partial
 
 import numpy as np
 from _common import best_seconds, machine_line, markdown_table, write_section
@@ -324,22 +326,22 @@ def time_all(
     us = {}
     for name, (filt, compiled, _) in ours().items():
         us[f"ours {name} single"] = (
-            best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled), repeats) / one
+            best_seconds(partial(run_ours, filt, z[0], initial[0], compiled), repeats) / one
         )
         us[f"ours {name} batched"] = (
-            best_seconds(lambda: run_ours(filt, z, initial, compiled), repeats) / all_runs
+            best_seconds(partial(run_ours, filt, z, initial, compiled), repeats) / all_runs
         )
+
+    def looped(kind: str) -> None:
+        for r in range(filterpy_runs):
+            run_filterpy(kind, z[r], initial[r])
+
     for kind in ("ukf", "ekf"):
         us[f"filterpy {kind} single"] = (
-            best_seconds(lambda: run_filterpy(kind, z[0], initial[0]), repeats) / one
+            best_seconds(partial(run_filterpy, kind, z[0], initial[0]), repeats) / one
         )
-
-        def looped():
-            for r in range(filterpy_runs):
-                run_filterpy(kind, z[r], initial[r])
-
         us[f"filterpy {kind} looped"] = (
-            best_seconds(looped, repeats) / (steps * filterpy_runs) * 1e6
+            best_seconds(partial(looped, kind), repeats) / (steps * filterpy_runs) * 1e6
         )
     return us
 

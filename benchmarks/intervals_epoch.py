@@ -28,6 +28,7 @@ import argparse
 import dataclasses
 import sys
 import time
+from functools import partial
 
 import numpy as np
 
@@ -104,7 +105,7 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
         }
         previous = dict.fromkeys(ENGINES)
         times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
-        for truth, scan in zip(poses, scans):
+        for truth, scan in zip(poses, scans, strict=True):
             results, best = _step_both(trackers, previous, scan, 1.0, repeat)
             result = results["compiled"]
             if result.status == "tracking":
@@ -231,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
             pavings = {}
             for engine in ENGINES:  # interleaved: both engines on each scan in turn
                 pavings[engine], best = _best_of(
-                    lambda e=engine: localize(scan, prior, eps, engine=e), args.repeat
+                    partial(localize, scan, prior, eps, engine=engine), args.repeat
                 )
                 times[engine].append(best)
             paving = pavings["compiled"]

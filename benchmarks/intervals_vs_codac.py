@@ -56,6 +56,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+from functools import partial
 
 import codac
 import numpy as np
@@ -159,7 +160,7 @@ def ray_distance_function(segments: np.ndarray, params) -> codac.AnalyticFunctio
     pose = codac.VectorVar(3)
     x, y, theta = pose[0], pose[1], pose[2]
     readings = []
-    for (mx, my), alpha in zip(params.mount_xy, params.mount_angle_rad):
+    for (mx, my), alpha in zip(params.mount_xy, params.mount_angle_rad, strict=True):
         radius, beta = float(np.hypot(mx, my)), float(np.arctan2(my, mx))
         sx, sy = x + radius * codac.cos(theta + beta), y + radius * codac.sin(theta + beta)
         ux, uy = codac.cos(theta + float(alpha)), codac.sin(theta + float(alpha))
@@ -278,6 +279,12 @@ def landmark_instances(count: int, rng: np.random.Generator):
         yield truth, np.stack([m - RANGE_ERROR_M, m + RANGE_ERROR_M], axis=-1)
 
 
+def codac_pave(x0, f, y, eps: float):
+    """Codac's paver on the separator of ``f^-1(y)`` over ``x0`` (the separator built inside,
+    so that its construction is timed with the paving)."""
+    return codac.pave(x0, codac.SepInverse(f, y), eps)
+
+
 def run_case_a(count: int, repeats: int, rng: np.random.Generator) -> list[dict]:
     f = codac_range_function()
     x0 = to_codac_box(LANDMARK_BOX)
@@ -288,7 +295,8 @@ def run_case_a(count: int, repeats: int, rng: np.random.Generator) -> list[dict]
             {
                 "truth": truth,
                 "ours": ours(
-                    lambda: sivia(
+                    partial(
+                        sivia,
                         range_test(ranges),
                         LANDMARK_BOX,
                         LANDMARK_EPS_M,
@@ -296,10 +304,8 @@ def run_case_a(count: int, repeats: int, rng: np.random.Generator) -> list[dict]
                     ),
                     repeats,
                 ),
-                "codac sivia": theirs(lambda: codac.sivia(x0, f, y, LANDMARK_EPS_M), repeats),
-                "codac pave": theirs(
-                    lambda: codac.pave(x0, codac.SepInverse(f, y), LANDMARK_EPS_M), repeats
-                ),
+                "codac sivia": theirs(partial(codac.sivia, x0, f, y, LANDMARK_EPS_M), repeats),
+                "codac pave": theirs(partial(codac_pave, x0, f, y, LANDMARK_EPS_M), repeats),
             }
         )
     return results
@@ -331,7 +337,8 @@ def run_case_b(
         result = {
             "truth": truth,
             "ours": ours(
-                lambda: localize(
+                partial(
+                    localize,
                     scan,
                     prior,
                     eps,
@@ -341,10 +348,11 @@ def run_case_b(
                 ),
                 repeats,
             ),
-            "codac sivia": theirs(lambda: codac.sivia(x0, f, y, eps), 1),
-            "codac pave": theirs(lambda: codac.pave(x0, codac.SepInverse(f, y), eps), 1),
+            "codac sivia": theirs(partial(codac.sivia, x0, f, y, eps), 1),
+            "codac pave": theirs(partial(codac_pave, x0, f, y, eps), 1),
             "ours + ray test": ours(
-                lambda: localize(
+                partial(
+                    localize,
                     scan,
                     prior,
                     eps,
@@ -387,7 +395,8 @@ def run_belt_case(count: int, repeats: int, rng: np.random.Generator) -> list[li
             prior = np.stack([centre - TRACKING_HALF, centre + TRACKING_HALF], axis=-1)
             alone.append(
                 ours(
-                    lambda: localize(
+                    partial(
+                        localize,
                         scan,
                         prior,
                         BELT_EPS,
@@ -400,7 +409,8 @@ def run_belt_case(count: int, repeats: int, rng: np.random.Generator) -> list[li
             )
             with_rays.append(
                 ours(
-                    lambda: localize(
+                    partial(
+                        localize,
                         scan,
                         prior,
                         BELT_EPS,
@@ -413,8 +423,8 @@ def run_belt_case(count: int, repeats: int, rng: np.random.Generator) -> list[li
             )
             if not (alone[-1].keeps(truth) and with_rays[-1].keeps(truth)):
                 raise SystemExit("FAILED: a set lost the truth (real belt)")
-        ratio = np.median([b.volume / a.volume for a, b in zip(alone, with_rays)])
-        smaller = sum(b.volume < a.volume for a, b in zip(alone, with_rays))
+        ratio = np.median([b.volume / a.volume for a, b in zip(alone, with_rays, strict=True)])
+        smaller = sum(b.volume < a.volume for a, b in zip(alone, with_rays, strict=True))
         rows.append(
             [
                 f"{gamma:.3g} rad ({np.degrees(gamma):.1f} deg)",

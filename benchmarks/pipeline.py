@@ -105,7 +105,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     print(f"| **total** | **{sum(first.values()):.3f}** | **{sum(best.values()):.3f}** | |")
     print(
-        f"| real-time factor | {args.duration / sum(first.values()):.0f}x | {args.duration / sum(best.values()):.0f}x | |"
+        f"| real-time factor | {args.duration / sum(first.values()):.0f}x "
+        f"| {args.duration / sum(best.values()):.0f}x | |"
     )
     s = figures["summary"]
     print(

@@ -23,6 +23,29 @@ from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario
 
 
+def time_stages(scenario: str, duration_s: float) -> dict[str, float]:
+    """Wall seconds of each stage of one ``robotsim run`` of ``scenario`` for ``duration_s``."""
+    stages: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        stages[name] = now - clock
+        clock = now
+
+    spec = load_scenario(scenario).with_run(duration_s=duration_s)
+    lap("load scenario")
+    log = simulate_spec(spec)
+    lap("simulate")
+    summarize(spec, log)
+    lap("summary")
+    with tempfile.TemporaryDirectory() as folder:
+        write_recording(Path(folder) / "run.rrd", spec, log)
+        lap("recording")
+    return stages
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenario", nargs="?", default="hall")
@@ -34,32 +57,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
 
-    runs: list[dict[str, float]] = []
-    for _ in range(args.repeat):
-        stages: dict[str, float] = {}
-        clock = time.perf_counter()
-
-        def lap(name: str) -> None:
-            nonlocal clock
-            now = time.perf_counter()
-            stages[name] = now - clock
-            clock = now
-
-        spec = load_scenario(args.scenario).with_run(duration_s=args.duration)
-        lap("load scenario")
-        log = simulate_spec(spec)
-        lap("simulate")
-        summarize(spec, log)
-        lap("summary")
-        with tempfile.TemporaryDirectory() as folder:
-            write_recording(Path(folder) / "run.rrd", spec, log)
-            lap("recording")
-        runs.append(stages)
-
+    runs = [time_stages(args.scenario, args.duration) for _ in range(args.repeat)]
     first = runs[0]
     best = {name: min(run[name] for run in runs) for name in first}
     print(
-        f"robotsim run {args.scenario}: {args.duration:g} s simulated; first run (cold, as one command) and best of {args.repeat}"
+        f"robotsim run {args.scenario}: {args.duration:g} s simulated; "
+        f"first run (cold, as one command) and best of {args.repeat}"
     )
     print(f"{'stage':<16}{'first s':>10}{'best s':>10}{'share':>9}")
     for name in first:

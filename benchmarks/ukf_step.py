@@ -248,7 +248,8 @@ def main(argv: list[str] | None = None) -> int:
         f"| numpy: batch of {args.batch} in slices, free model, per run-step | {batched_free:.2f} | |"
     )
     print(
-        f"| numpy: batch of {args.batch} in one piece, per run-step ({whole_faults:.0f} page faults/step) | {whole_us:.2f} | |"
+        f"| numpy: batch of {args.batch} in one piece, per run-step "
+        f"({whole_faults:.0f} page faults/step) | {whole_us:.2f} | |"
     )
     print(f"| batch of {args.batch}, CTRV transition per run (11 points) | {ctrv_batched:.2f} | |")
     print(f"| filterpy UKF, one filter, same model (sigma-point loop) | {theirs:.1f} | |")

@@ -46,11 +46,13 @@ widens the result); it dominates the float error of locating ``k pi`` for ``|x| 
 _TWO_PI = 2.0 * np.pi
 
 
-def _down(x: np.ndarray) -> np.ndarray:
+def _down(x: np.ndarray | float) -> np.ndarray:
+    """The float one ulp below each entry of ``x`` (an outward rounding of a lower bound)."""
     return np.nextafter(x, -np.inf)
 
 
-def _up(x: np.ndarray) -> np.ndarray:
+def _up(x: np.ndarray | float) -> np.ndarray:
+    """The float one ulp above each entry of ``x`` (an outward rounding of an upper bound)."""
     return np.nextafter(x, np.inf)
 
 
@@ -294,7 +296,7 @@ def atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
     xs = (x[..., 0], x[..., 1], x[..., 0], x[..., 1])
     ys = (y[..., 0], y[..., 0], y[..., 1], y[..., 1])
     with np.errstate(invalid="ignore"):
-        ang = np.stack([np.arctan2(yy, xx) for xx, yy in zip(xs, ys)], axis=-1)
+        ang = np.stack([np.arctan2(yy, xx) for xx, yy in zip(xs, ys, strict=True)], axis=-1)
     contains_origin = (x[..., 0] <= 0) & (x[..., 1] >= 0) & (y[..., 0] <= 0) & (y[..., 1] >= 0)
     # straddles the cut: some point with x < 0 and y = 0, or y on both sides with x < 0
     cut = (x[..., 0] < 0) & (y[..., 0] < 0) & (y[..., 1] >= 0)

@@ -46,7 +46,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization import motion_models as kernels
+from localization import motion_models
 from localization.compiled_linalg import all_finite, kalman_gain_t, wrap_angle
 from localization.compiled_ukf import (
     NOT_FINITE,
@@ -194,10 +194,10 @@ def update_core(
 
 #: The built-in process kernels ``(f, F)``, by the number :func:`_predict_builtin` switches on.
 BUILTIN_PROCESS_KERNELS = (
-    (kernels.cv_point, kernels.cv_jacobian_point),
-    (kernels.ctrv_point, kernels.ctrv_jacobian_point),
-    (kernels.ctra_point, kernels.ctra_jacobian_point),
-    (kernels.cca_point, kernels.cca_jacobian_point),
+    (motion_models.cv_point, motion_models.cv_jacobian_point),
+    (motion_models.ctrv_point, motion_models.ctrv_jacobian_point),
+    (motion_models.ctra_point, motion_models.ctra_jacobian_point),
+    (motion_models.cca_point, motion_models.cca_jacobian_point),
 )
 
 
@@ -206,8 +206,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
     """:func:`predict_core` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return predict_core(
-            kernels.cv_point,
-            kernels.cv_jacobian_point,
+            motion_models.cv_point,
+            motion_models.cv_jacobian_point,
             mean,
             cov,
             args,
@@ -218,8 +218,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
         )
     if model == 1:
         return predict_core(
-            kernels.ctrv_point,
-            kernels.ctrv_jacobian_point,
+            motion_models.ctrv_point,
+            motion_models.ctrv_jacobian_point,
             mean,
             cov,
             args,
@@ -230,8 +230,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
         )
     if model == 2:
         return predict_core(
-            kernels.ctra_point,
-            kernels.ctra_jacobian_point,
+            motion_models.ctra_point,
+            motion_models.ctra_jacobian_point,
             mean,
             cov,
             args,
@@ -241,8 +241,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
             out_cov,
         )
     return predict_core(
-        kernels.cca_point,
-        kernels.cca_jacobian_point,
+        motion_models.cca_point,
+        motion_models.cca_jacobian_point,
         mean,
         cov,
         args,
@@ -256,8 +256,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
 @numba.njit(cache=True)
 def _update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
     return update_core(
-        kernels.leading_entries_point,
-        kernels.leading_entries_jacobian_point,
+        motion_models.leading_entries_point,
+        motion_models.leading_entries_jacobian_point,
         mean,
         cov,
         z,
@@ -278,7 +278,10 @@ PREDICT_ENTRIES = {
 
 #: Update entries by ``(h, H)`` kernels: the built-in one (cached on disk), then users'.
 UPDATE_ENTRIES = {
-    (kernels.leading_entries_point, kernels.leading_entries_jacobian_point): _update_leading_entries
+    (
+        motion_models.leading_entries_point,
+        motion_models.leading_entries_jacobian_point,
+    ): _update_leading_entries
 }
 
 
@@ -302,8 +305,8 @@ def predict_entry(point, jacobian_point) -> tuple:
 def update_entry(point, jacobian_point):
     """The compiled update entry of the kernels ``(h, H)`` (as :func:`predict_entry`)."""
     key = (point, jacobian_point)
-    entry = UPDATE_ENTRIES.get(key)
-    if entry is None:
+    found = UPDATE_ENTRIES.get(key)
+    if found is None:
 
         @numba.njit
         def entry(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
@@ -321,14 +324,16 @@ def update_entry(point, jacobian_point):
                 out_cov,
             )
 
-        UPDATE_ENTRIES[key] = entry
-    return entry
+        found = UPDATE_ENTRIES[key] = entry
+    return found
 
 
 # -------------------------------------------------------------------------- the Python side
 
 
-def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple):
+def predict(
+    mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``model`` is an additive-noise :class:`~localization.models.ProcessModel` with both
@@ -364,7 +369,7 @@ def predict(mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], m
 
 def update(
     mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], z, model, args: tuple
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``

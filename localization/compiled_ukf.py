@@ -63,7 +63,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization import motion_models as kernels
+from localization import motion_models
 from localization.compiled_linalg import (
     all_finite,
     cholesky_lower,
@@ -326,18 +326,18 @@ def update_core(
 
 # ------------------------------------------------------------------- cached built-in entries
 # Module-level entries, so numba caches their machine code on disk; one entry holds the
-# four motion models (a closure per model would not be cached). The
-# kernel is named as a module attribute (``kernels.ctrv_point``): numba resolves that to a
-# constant while typing, whereas a bare imported name passed as a value is lowered as a
-# pointer to the Python object, which makes the entry uncacheable ("dynamic globals").
+# four motion models (a closure per model would not be cached). The kernel is named as a
+# module attribute (``motion_models.ctrv_point``): numba resolves that to a constant while
+# typing, whereas a bare imported name passed as a value is lowered as a pointer to the
+# Python object, which makes the entry uncacheable ("dynamic globals").
 
 
 #: The built-in process kernels (additive, augmented), by the number the entries switch on.
 BUILTIN_PROCESS_KERNELS = (
-    (kernels.cv_point, kernels.cv_noisy_point),
-    (kernels.ctrv_point, kernels.ctrv_noisy_point),
-    (kernels.ctra_point, kernels.ctra_noisy_point),
-    (kernels.cca_point, kernels.cca_noisy_point),
+    (motion_models.cv_point, motion_models.cv_noisy_point),
+    (motion_models.ctrv_point, motion_models.ctrv_noisy_point),
+    (motion_models.ctra_point, motion_models.ctra_noisy_point),
+    (motion_models.cca_point, motion_models.cca_noisy_point),
 )
 
 
@@ -346,18 +346,18 @@ def _predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, o
     """:func:`predict_core` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return predict_core(
-            kernels.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion_models.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     if model == 1:
         return predict_core(
-            kernels.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion_models.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     if model == 2:
         return predict_core(
-            kernels.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion_models.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     return predict_core(
-        kernels.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+        motion_models.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
     )
 
 
@@ -366,18 +366,34 @@ def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_me
     """:func:`augmented_predict_core` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return augmented_predict_core(
-            kernels.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+            motion_models.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
         )
     if model == 1:
         return augmented_predict_core(
-            kernels.ctrv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+            motion_models.ctrv_noisy_point,
+            mean,
+            cov,
+            args,
+            root,
+            weights,
+            angles,
+            out_mean,
+            out_cov,
         )
     if model == 2:
         return augmented_predict_core(
-            kernels.ctra_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+            motion_models.ctra_noisy_point,
+            mean,
+            cov,
+            args,
+            root,
+            weights,
+            angles,
+            out_mean,
+            out_cov,
         )
     return augmented_predict_core(
-        kernels.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+        motion_models.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
     )
 
 
@@ -386,7 +402,7 @@ def _update_leading_entries(
     mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
 ):
     return update_core(
-        kernels.leading_entries_point,
+        motion_models.leading_entries_point,
         mean,
         cov,
         z,
@@ -409,7 +425,7 @@ PREDICT_ENTRIES = {
 }
 
 #: Cached entries of the built-in measurement kernels, by kernel.
-UPDATE_ENTRIES = {kernels.leading_entries_point: _update_leading_entries}
+UPDATE_ENTRIES = {motion_models.leading_entries_point: _update_leading_entries}
 
 
 # -------------------------------------------------------------------- entries of user kernels
@@ -443,8 +459,8 @@ def predict_entry(point, augmented: bool) -> tuple:
 
 def update_entry(point):
     """The compiled update entry of the measurement kernel ``point`` (as :func:`predict_entry`)."""
-    entry = UPDATE_ENTRIES.get(point)
-    if entry is None:
+    found = UPDATE_ENTRIES.get(point)
+    if found is None:
 
         @numba.njit
         def entry(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
@@ -452,8 +468,8 @@ def update_entry(point):
                 point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
             )
 
-        UPDATE_ENTRIES[point] = entry
-    return entry
+        found = UPDATE_ENTRIES[point] = entry
+    return found
 
 
 # -------------------------------------------------------------------------- the Python side
@@ -576,7 +592,7 @@ def runs_of(mean: np.ndarray) -> int:
 
 def predict(
     weights, mean: np.ndarray, cov: np.ndarray, angle_indices: tuple[int, ...], model, args: tuple
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``weights`` are the :class:`~localization.sigma_points.SigmaWeights` of the state (or of
@@ -622,7 +638,7 @@ def update(
     z,
     model,
     args: tuple,
-):
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The compiled update ``(mean, cov)`` of a belief by ``z (..., m)``, or ``None`` (numpy path).
 
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``

@@ -3,8 +3,9 @@
 :class:`~localization.dead_reckoning.DeadReckoning` calls :func:`run_steps` once per
 ``run()`` stretch; the kernel loops over the samples ``start..stop-1`` and, inside each
 sample, over the runs of the batch, and writes the history rows in place. It is the same
-filter as C's generic objects on the model of :mod:`localization.dead_reckoning` (the
-reference it is tested against, ``tests/localization/test_dead_reckoning.py``):
+filter as the generic filter classes (:mod:`localization.ukf`, :mod:`localization.iukf`,
+:mod:`localization.ekf`) on the model of :mod:`localization.dead_reckoning` (the reference
+it is tested against, ``tests/localization/test_dead_reckoning.py``):
 
 - prediction, unscented (UKF, IUKF; paper 001 eq. 25-27): sigma points
   ``X_0 = x``, ``X_i = x + gamma L_i``, ``X_{n+i} = x - gamma L_i`` (``L`` the lower Cholesky
@@ -15,8 +16,8 @@ reference it is tested against, ``tests/localization/test_dead_reckoning.py``):
 - update, closed form for the linear ``h(s) = H(k) s`` (the unscented update equals it, and
   the iterated ones converge at their first iteration; module docstring of
   :mod:`localization.dead_reckoning`): ``S = H P- H^T + R``, ``K^T = S^-1 H P-`` (Cholesky
-  solve), ``x+ = x- + K (z - H x-)``, ``P+ = P- - P- H^T K^T`` (C's EKF takes the Joseph
-  form, equal in exact arithmetic).
+  solve), ``x+ = x- + K (z - H x-)``, ``P+ = P- - P- H^T K^T`` (``ExtendedKalmanFilter``
+  takes the Joseph form, equal in exact arithmetic).
 
 Covariances are built from their lower triangle and mirrored, so they stay exactly
 symmetric. The heading is kept unwrapped in the carried mean (the model is periodic in it)

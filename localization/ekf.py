@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,9 +54,11 @@ def compiled_path(model: ProcessModel | MeasurementModel) -> bool:
     )
 
 
-def _require_jacobian(model: ProcessModel | MeasurementModel, step: str) -> None:
+def _jacobian_of(model: ProcessModel | MeasurementModel, step: str) -> Callable[..., np.ndarray]:
+    """The model's Jacobian function; an :class:`EstimationError` when it has none."""
     if model.jacobian is None:
         raise EstimationError(f"{step}: the model has no jacobian (the EKF family needs one)")
+    return model.jacobian
 
 
 def ekf_predict(belief: Gaussian, model: ProcessModel, args: tuple, step: str) -> Gaussian:
@@ -65,10 +68,10 @@ def ekf_predict(belief: Gaussian, model: ProcessModel, args: tuple, step: str) -
         if done is not None:
             return Gaussian.trusted(*done, belief.angle_indices)
     check_args(args, step)
-    _require_jacobian(model, step)
+    jacobian = _jacobian_of(model, step)
     if model.noise != "additive":
         raise EstimationError(f"{step}: the EKF family needs additive process noise")
-    jac = model.jacobian(belief.mean, *args)
+    jac = jacobian(belief.mean, *args)
     mean = wrap_columns(np.array(model.f(belief.mean, *args), dtype=float), belief.angle_indices)
     cov = jac @ belief.cov @ jac.mT + model.Q
     require_finite(mean, "the predicted mean (model output)", step)
@@ -117,9 +120,9 @@ class ExtendedKalmanFilter:
         step = "EKF update"
         require_finite(z, "the measurement z", step)
         check_args(args, step)
-        _require_jacobian(model, step)
+        jacobian = _jacobian_of(model, step)
         innovation = model.residual(z, model.h(belief.mean, *args), step)
-        jac = model.jacobian(belief.mean, *args)
+        jac = jacobian(belief.mean, *args)
         gain = kalman_gain(belief.cov, jac, model.R)
         mean = wrap_columns(
             belief.mean + (gain @ innovation[..., None])[..., 0], belief.angle_indices
@@ -174,14 +177,14 @@ def iterated_update(
     """
     require_finite(z, "the measurement z", step)
     check_args(args, step)
-    _require_jacobian(model, step)
+    jacobian = _jacobian_of(model, step)
     angles = belief.angle_indices
     prior = belief.mean
     iterate = prior
     active = np.ones(prior.shape[:-1], dtype=bool)
     gain = jac = None
     for _ in range(settings.max_iterations):
-        jac_l = model.jacobian(iterate, *args)
+        jac_l = jacobian(iterate, *args)
         innovation = model.residual(z, model.h(iterate, *args), step)
         correction = innovation - (jac_l @ wrap_columns(prior - iterate, angles)[..., None])[..., 0]
         gain_l = kalman_gain(belief.cov, jac_l, model.R)
@@ -206,6 +209,7 @@ def iterated_update(
             stacklevel=3,
         )
     require_finite(iterate, "the updated mean", step)
+    assert gain is not None and jac is not None  # IterationSettings: max_iterations >= 1
     return Gaussian.trusted(iterate, joseph_covariance(belief.cov, gain, jac, model.R), angles)
 
 

@@ -71,6 +71,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numba
 import numpy as np
@@ -102,7 +103,8 @@ _M2S_OVER_U = _sin_moment_series(2)  # 1/4 - u^2/36 + ...
 
 
 def _horner(u2: Array, coefficients: tuple[float, ...]) -> Array:
-    acc = coefficients[-1]
+    """``sum_j coefficients[j] u2^j``, evaluated by Horner's rule."""
+    acc: Array = np.asarray(coefficients[-1])
     for c in coefficients[-2::-1]:
         acc = acc * u2 + c
     return acc
@@ -785,7 +787,9 @@ class MotionModel:
         out[..., driven] += half
         return out
 
-    def process_model(self, Q: Array, noise: str = "additive") -> ProcessModel:
+    def process_model(
+        self, Q: Array, noise: Literal["additive", "augmented"] = "additive"
+    ) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
 
         ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;

@@ -37,6 +37,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TypeVar
 
 import numpy as np
 
@@ -126,9 +127,12 @@ def _resolved_kappa(owner: str, n: int, kappa: float | None) -> float:
     return kappa
 
 
+_SchemeT = TypeVar("_SchemeT")  # a sigma-point settings class
+
+
 def _per_dimension(
-    build: Callable[[object, int], SigmaWeights],
-) -> Callable[[object, int], SigmaWeights]:
+    build: Callable[[_SchemeT, int], SigmaWeights],
+) -> Callable[[_SchemeT, int], SigmaWeights]:
     """``weights(self, n)`` cached in the instance's ``__dict__`` (a frozen dataclass allows that).
 
     A dictionary lookup per step: ``functools.lru_cache`` would hash the settings dataclass on
@@ -136,7 +140,7 @@ def _per_dimension(
     """
 
     @functools.wraps(build)
-    def weights(self, n: int) -> SigmaWeights:
+    def weights(self: _SchemeT, n: int) -> SigmaWeights:
         cache = self.__dict__.setdefault("_weights_by_dimension", {})
         found = cache.get(n)
         if found is None:

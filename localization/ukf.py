@@ -45,6 +45,7 @@ batches are stepped in slices of :data:`SLICE_RUNS` runs.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -132,7 +133,7 @@ def run_slices(batch_shape: tuple[int, ...], noise_cov: np.ndarray) -> list[slic
     runs = batch_shape[0]
     count = -(-runs // SLICE_RUNS)
     edges = [runs * i // count for i in range(count + 1)]
-    return [slice(start, stop) for start, stop in zip(edges[:-1], edges[1:])]
+    return [slice(start, stop) for start, stop in itertools.pairwise(edges)]
 
 
 def sliced_args(args: tuple, runs: int, part: slice) -> tuple:

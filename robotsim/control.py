@@ -100,6 +100,8 @@ class PurePursuit:
     def _point(self, index: int) -> tuple[float, float]:
         """Path point ``index``: 0 is the start, then the waypoints (cycling if looping)."""
         if index == 0:
+            if self._start is None:  # set from the pose of the first command()
+                raise RuntimeError("PurePursuit: the path has no start before the first command")
             return self._start
         count = len(self._waypoints)
         return self._waypoints[
@@ -205,7 +207,9 @@ class ScriptedController:
 
     def __init__(self, profile: ScriptedProfile) -> None:
         self._t = profile.t_s.tolist()
-        self._commands = list(zip(profile.v_m_s.tolist(), profile.omega_rad_s.tolist()))
+        self._commands = list(
+            zip(profile.v_m_s.tolist(), profile.omega_rad_s.tolist(), strict=True)
+        )
 
     def command(self, t_s: float, x_m: float, y_m: float, theta_rad: float) -> tuple[float, float]:
         """The profile's ``(v_m_s, omega_rad_s)`` at ``t_s``."""

@@ -97,7 +97,7 @@ class SimulationLog:
     world: WorldParams
 
     def __post_init__(self) -> None:
-        for name, value in vars(self).items():
+        for value in vars(self).values():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
 
@@ -134,7 +134,7 @@ def simulate(
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise RobotsimError(f"duration_s must be positive and finite, got {duration_s}")
     rate_hz = world.step_hz
-    count = int(round(duration_s * rate_hz)) + 1
+    count = round(duration_s * rate_hz) + 1
     sim_world = World(segment_map, robot, start_pose, world)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
 
@@ -218,9 +218,8 @@ def _run_physics(
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
     the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
 
-    Contacts come from pymunk: a ``post_solve`` handler on every pair of shapes (the robot's
-    disk is the only dynamic shape, so every solved contact is the robot against a wall)
-    sets a flag that the loop reads and clears after each step.
+    Contacts come from :meth:`World.on_wall_contact` (pymunk's solver): its callback sets a
+    flag that the loop reads and clears after each step.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -230,15 +229,14 @@ def _run_physics(
         robot.wheel_base_m,
     ).tolist()
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
-    states = [None] * count
-    commands = [None] * count
+    states: list[tuple[float, float, float, float, float]] = []
+    commands: list[tuple[float, float]] = []
     touched = [False]
 
-    def note_contact(arbiter, space, data) -> None:
+    def note_contact() -> None:
         touched[0] = True
 
-    # World keeps its pymunk space private; the handler only observes (it changes nothing)
-    sim_world._space.on_collision(None, None, post_solve=note_contact)
+    sim_world.on_wall_contact(note_contact)
     contact = np.zeros(count, dtype=bool)
     report_every = max(1, count // PROGRESS_REPORTS)
     target = (0.0, 0.0)
@@ -248,10 +246,14 @@ def _run_physics(
             progress(k / count)
         if k in schedule:
             sim_world.teleport(schedule[k])
-        x, y, theta, v, omega = states[k] = state()
+        now = state()
+        states.append(now)
         if k == count - 1:
             break
-        wanted_v, wanted_omega = commands[k] = command(k * dt_s, x, y, theta)
+        x, y, theta, _, _ = now
+        wanted = command(k * dt_s, x, y, theta)
+        commands.append(wanted)
+        wanted_v, wanted_omega = wanted
         target = limit_command(
             wanted_v * vv + wanted_omega * vw,
             wanted_v * wv + wanted_omega * ww,
@@ -265,5 +267,5 @@ def _run_physics(
             touched[0] = False
     if progress is not None:
         progress(1.0)
-    commands[-1] = commands[-2] if count > 1 else (0.0, 0.0)
+    commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
     return np.array(states), np.array(commands, dtype=np.float64), contact

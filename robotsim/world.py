@@ -16,6 +16,7 @@ way. The true pose and velocity are whatever pymunk computes.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,6 +121,21 @@ class World:
 
         self._space, self._body, self._control = space, body, control
         self.teleport(pose)
+
+    def on_wall_contact(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` each time pymunk's solver resolves a contact of the robot with a
+        wall (a ``post_solve`` handler on every pair of shapes: the robot's disk is the only
+        dynamic shape, so every solved contact is the robot against a wall); called during
+        :meth:`step`, possibly several times a step.
+
+        The callback only observes: it gets no handle on the space and must not change the
+        world from inside the solver. A later call replaces the earlier callback.
+        """
+
+        def post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, data: dict) -> None:
+            callback()
+
+        self._space.on_collision(None, None, post_solve=post_solve)
 
     def check_free(self, pose) -> np.ndarray:
         """The pose as a float array ``(3,)`` if the robot's disk fits there (clear of all

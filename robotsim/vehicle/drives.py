@@ -42,8 +42,15 @@ def _trapezoid_shape(n_ramp: int, n_flat: int) -> np.ndarray:
     return np.concatenate([ramp, np.ones(n_flat), ramp[::-1]])
 
 
-class _Profile:
-    """Collects manoeuvres as input arrays (acceleration, curvature) at ``rate_hz``."""
+class ManoeuvreProfile:
+    """A drive under construction: manoeuvres appended as input arrays (acceleration,
+    curvature) at ``rate_hz``, from the speed ``speed_m_s``.
+
+    :func:`urban_drive` and :func:`highway_drive` are sequences of its manoeuvres
+    (:meth:`hold`, :meth:`speed_change`, :meth:`turn`, :meth:`lane_change`); a hand-made
+    sequence gives a drive of one's own. :meth:`build` integrates the inputs into a
+    :class:`~robotsim.vehicle.single_track.ReferenceDrive`.
+    """
 
     def __init__(self, rate_hz: float, speed_m_s: float, params: VehicleParams):
         self.dt = 1.0 / rate_hz
@@ -120,6 +127,8 @@ class _Profile:
     def build(
         self, name: str, duration_s: float, initial_speed_m_s: float, rate_hz: float
     ) -> ReferenceDrive:
+        """The reference drive ``name``: the first ``duration_s`` of the manoeuvres, starting at
+        the origin heading along +x at ``initial_speed_m_s`` (the speed the profile began at)."""
         n = round(duration_s * rate_hz) + 1
         accel = np.concatenate(self.accel)[:n]
         steer = np.arctan(np.concatenate(self.curvature)[:n] * self.params.wheelbase_m)
@@ -148,7 +157,7 @@ def urban_drive(
     params = params or VehicleParams()
     accel_hi = LIMIT_MARGIN * params.a_max_m_s2
     brake_hi = LIMIT_MARGIN * -params.a_min_m_s2
-    p = _Profile(rate_hz, 0.0, params)
+    p = ManoeuvreProfile(rate_hz, 0.0, params)
     while p.duration_s < duration_s:
         p.speed_change(rng.uniform(8.0, 14.0), rng.uniform(1.5, accel_hi))
         p.hold(rng.uniform(3.0, 12.0))
@@ -180,7 +189,7 @@ def highway_drive(
     _check(duration_s, rate_hz)
     params = params or VehicleParams()
     initial_speed = rng.uniform(24.0, 30.0)
-    p = _Profile(rate_hz, initial_speed, params)
+    p = ManoeuvreProfile(rate_hz, initial_speed, params)
     while p.duration_s < duration_s:  # every block holds one of each manoeuvre, in random order
         for kind in rng.permutation(3):
             p.hold(rng.uniform(5.0, 15.0))

@@ -112,7 +112,8 @@ def main(args: argparse.Namespace) -> int:
         else "NOT all hold: " + ", ".join(k for k, v in claims.items() if not v)
     )
     print(
-        f"ia-fusion: {spec.run.duration_s:g} s of {spec.name}, seed {spec.run.seed}; paper's claims {verdict}; wrote {args.out}"
+        f"ia-fusion: {spec.run.duration_s:g} s of {spec.name}, seed {spec.run.seed}; "
+        f"paper's claims {verdict}; wrote {args.out}"
     )
     missed = missed_guarantee(rows)
     if missed:
@@ -175,16 +176,19 @@ def markdown(table: dict[str, Any]) -> str:
         f"# Paper 002: UKF clamped to interval boxes on `{table['scenario']}` "
         f"({table['duration_s']:g} s, seed {table['seed']})",
         "",
-        "| tracker | RMSE pos. UKF-only (m) | RMSE pos. fused (m) | fused / UKF-only | RMSE heading UKF-only / fused (rad) "
-        "| mean box area (m²) | mean box width (m) | median ms / epoch | p95 ms | containment | empty / lost epochs |",
+        "| tracker | RMSE pos. UKF-only (m) | RMSE pos. fused (m) | fused / UKF-only "
+        "| RMSE heading UKF-only / fused (rad) | mean box area (m²) | mean box width (m) "
+        "| median ms / epoch | p95 ms | containment | empty / lost epochs |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in table["trackers"].items():
         pos, head = r["rmse_position_m"], r["rmse_heading_rad"]
         lines.append(
-            f"| {name} | {pos['ukf_only']:.3f} | {pos['fused']:.3f} | {r['fused_to_ukf_only_position_rmse']:.2f} "
-            f"| {head['ukf_only']:.4f} / {head['fused']:.4f} | {r['box']['mean_area_m2']:.4f} | {r['box']['mean_width_m']:.3f} "
-            f"| {r['epoch_ms_median']:.1f} | {r['epoch_ms_p95']:.1f} | {r['containment']:.3f} | {r['empty_epochs']} / {r['lost_epochs']} |"
+            f"| {name} | {pos['ukf_only']:.3f} | {pos['fused']:.3f} "
+            f"| {r['fused_to_ukf_only_position_rmse']:.2f} "
+            f"| {head['ukf_only']:.4f} / {head['fused']:.4f} | {r['box']['mean_area_m2']:.4f} "
+            f"| {r['box']['mean_width_m']:.3f} | {r['epoch_ms_median']:.1f} | {r['epoch_ms_p95']:.1f} "
+            f"| {r['containment']:.3f} | {r['empty_epochs']} / {r['lost_epochs']} |"
         )
     lines += [
         "",
@@ -254,12 +258,11 @@ def _draw_boxes(ax, estimation: Estimation) -> None:
     from matplotlib.patches import Rectangle
 
     epochs = estimation.epochs
-    patches = []
-    for e in range(0, len(epochs.t_s), BOX_EVERY):
-        for box in epochs.epoch_boxes(e):
-            patches.append(
-                Rectangle((box[0, 0], box[1, 0]), box[0, 1] - box[0, 0], box[1, 1] - box[1, 0])
-            )
+    patches = [
+        Rectangle((box[0, 0], box[1, 0]), box[0, 1] - box[0, 0], box[1, 1] - box[1, 0])
+        for e in range(0, len(epochs.t_s), BOX_EVERY)
+        for box in epochs.epoch_boxes(e)
+    ]
     ax.add_collection(
         PatchCollection(
             patches, facecolor="tab:red", edgecolor="darkred", lw=0.8, alpha=0.7, zorder=3

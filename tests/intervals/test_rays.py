@@ -23,7 +23,8 @@ from intervals.rays import (
 )
 from intervals.sonar import SonarBelt, SonarScan, _uses_ray_test, gomne, localize, sensor_verdicts
 from robotsim.maps import builtin_map
-from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+from robotsim.sensors.sonar import SonarBeltParams
+from tests.helpers import bounded_readings, boxes_around, cone_ranges
 
 GAMMAS_RAD = (1e-6, 0.02, 0.2)
 
@@ -56,32 +57,6 @@ def _random_belt(rng, gamma):
     )
 
 
-def _distances(poses, segments, params):
-    return cone_distances(
-        poses, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad
-    )
-
-
-def _readings(d, params, rng):
-    """Bounded-error readings, half of them exactly at an error bound (``inf`` beyond d_max)."""
-    finite = np.where(np.isfinite(d), d, 0.0)
-    bound = params.error_abs_bound_m + params.error_rel_bound * finite
-    unit = rng.uniform(-1, 1, size=d.shape)
-    unit = np.where(rng.random(d.shape) < 0.5, np.sign(unit), unit)
-    return np.where(d > params.d_max_m, np.inf, np.maximum(finite + unit * bound, 0.0))
-
-
-def _boxes_around(truth, rng, count):
-    """Boxes ``(count, 3, 2)`` holding ``truth``: widths 1e-6 to 2 m and 1e-6 to 2 pi rad, a
-    fifth of them with the truth on a face or corner."""
-    w = np.exp(rng.uniform(np.log(1e-6), np.log(2.0), size=(count, 3)))
-    w[:, 2] = np.exp(rng.uniform(np.log(1e-6), np.log(2 * np.pi), size=count))
-    frac = rng.uniform(0, 1, size=(count, 3))
-    frac[: count // 5] = rng.choice([0.0, 1.0], size=(count // 5, 3))
-    lo = truth - frac * w
-    return np.stack([lo, np.maximum(lo + w, truth)], axis=-1)
-
-
 def _case(rng, gamma, echoes_never_lost):
     """A random map, belt, true pose (0.3 m clear of walls) and its scan."""
     segments, outer = _random_map(rng)
@@ -93,10 +68,11 @@ def _case(rng, gamma, echoes_never_lost):
         if np.min(np.hypot(*(a + t[:, None] * e - truth[:2]).T)) > 0.3:
             break
     belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
-    readings = _readings(_distances(truth, segments, params), params, rng)
+    readings = bounded_readings(cone_ranges(truth, segments, params), params, rng)
     return SonarScan(segments, belt, readings, outer), params, truth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_boxes_holding_the_truth_are_never_rejected(gamma):
     """3 x 200 cases x 40 boxes, no-echo readings used as free space in half of them; whole
@@ -105,7 +81,7 @@ def test_boxes_holding_the_truth_are_never_rejected(gamma):
     rng = np.random.default_rng(int(gamma * 1e6) + 7)
     for case in range(200):
         scan, _, truth = _case(rng, gamma, echoes_never_lost=case % 2 == 0)
-        boxes = _boxes_around(truth, rng, 40)
+        boxes = boxes_around(truth, rng, 40)
         if case % 3 == 0:
             assert not ray_rejections(boxes, scan).any()
             assert not ray_rejections(boxes, scan.restricted_to(boxes)).any()
@@ -120,6 +96,7 @@ def test_boxes_holding_the_truth_are_never_rejected(gamma):
         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_every_pose_of_a_rejected_box_disagrees_with_the_rejecting_sensor(gamma):
     """Brute force on boxes near the truth: 64 poses (corners and random) per rejected box."""
@@ -138,7 +115,7 @@ def test_every_pose_of_a_rejected_box_disagrees_with_the_rejecting_sensor(gamma)
         frac = np.concatenate([corners, rng.uniform(0, 1, (56, 3))])  # (64, 3)
         lo, hi = boxes[rows, :, 0], boxes[rows, :, 1]
         poses = lo[:, None] + frac[None] * (hi - lo)[:, None]  # (R, 64, 3)
-        d = _distances(poses, scan.segments, params)  # (R, 64, k)
+        d = cone_ranges(poses, scan.segments, params)  # (R, 64, k)
         fits = (d >= scan.ranges[:, 0]) & (d <= scan.ranges[:, 1])
         assert not np.any(fits & reject[rows][:, None, :])
         checked += rows.size
@@ -153,6 +130,7 @@ def _shifted(truth, rng, count, half):
     return np.stack([centre - half, centre + half], axis=-1)
 
 
+@pytest.mark.slow
 def test_most_boxes_away_from_the_truth_are_rejected_by_a_thin_cone():
     rng = np.random.default_rng(3)
     rejected = total = 0
@@ -179,7 +157,9 @@ def test_rejects_boxes_the_sonar_test_keeps(gamma):
     for truth in ([2.0, 6.0, 0.3], [5.0, 3.0, -2.0], [8.5, 6.5, 1.4], [4.0, 1.0, 3.0]):
         truth = np.array(truth)
         scan = SonarScan(
-            hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+            hall.segments,
+            belt,
+            bounded_readings(cone_ranges(truth, hall.segments, params), params, rng),
         )
         centre = truth + rng.uniform(-1, 1, (300, 3)) * np.array([0.05, 0.05, 0.03])
         boxes = np.stack([centre - 0.02, centre + 0.02], axis=-1)
@@ -253,7 +233,9 @@ def test_sonar_verdicts_and_rays_agree_on_the_truth_box_of_the_real_belt():
     belt = SonarBelt.from_params(params, echoes_never_lost=True)
     truth = np.array([5.0, 4.0, 0.7])
     scan = SonarScan(
-        hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+        hall.segments,
+        belt,
+        bounded_readings(cone_ranges(truth, hall.segments, params), params, rng),
     )
     boxes = np.stack([truth - 0.02, truth + 0.02], axis=-1)[None]
     assert not ray_rejections(boxes, scan).any() and not sensor_verdicts(boxes, scan)[0].any()
@@ -277,6 +259,7 @@ def test_sub_boxes_cover_the_box_exactly():
         assert np.array_equal(ends[:, 1:, 0], ends[:, :-1, 1])
 
 
+@pytest.mark.slow
 def test_joint_test_rejects_what_no_single_sensor_can():
     """Heading pieces each rejected by a different sensor: the joint test rejects the box,
     the per-sensor test cannot; and ``other`` rejections count in every piece."""
@@ -288,7 +271,9 @@ def test_joint_test_rejects_what_no_single_sensor_can():
     for _ in range(8):
         truth = np.array([*rng.uniform([1, 1], [9, 7]), rng.uniform(-np.pi, np.pi)])
         scan = SonarScan(
-            hall.segments, belt, _readings(_distances(truth, hall.segments, params), params, rng)
+            hall.segments,
+            belt,
+            bounded_readings(cone_ranges(truth, hall.segments, params), params, rng),
         )
         centre = truth + rng.uniform(-1, 1, (150, 3)) * np.array([0.1, 0.1, 0.1])
         boxes = np.stack([centre - 0.03, centre + 0.03], axis=-1)
@@ -307,6 +292,7 @@ def test_joint_test_rejects_what_no_single_sensor_can():
     assert not joint_rejections(boxes[:10], scan, 16, (1, 1, 4), other=everything).any()
 
 
+@pytest.mark.slow
 def test_compiled_engine_matches_the_numpy_reference():
     """Same verdicts on random cases, thin and wide cones, with edge cases: degenerate and
     unbounded boxes, headings at +-pi and far beyond, boxes wider than the room."""

@@ -132,6 +132,7 @@ def test_components_join_across_the_heading_cut():
     assert bx.connected_components(boxes)[0] == 3
 
 
+@pytest.mark.slow
 def test_imagesp_encloses_image_of_random_points():
     """Rotation by an uncertain angle plus translation, checked on 20 000 random points."""
     rng = np.random.default_rng(7)

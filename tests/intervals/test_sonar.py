@@ -20,46 +20,10 @@ from intervals.sonar import (
 )
 from intervals.sonar import _sensor_boxes as sensor_boxes
 from robotsim.maps import builtin_map
-from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+from robotsim.sensors.sonar import SonarBeltParams
+from tests.helpers import bounded_readings, boxes_around, cone_ranges, random_room
 
 PARAMS = SonarBeltParams.default_belt()
-
-
-def _distances(poses, segments, params=PARAMS):
-    return cone_distances(
-        poses, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad
-    )
-
-
-def _readings(d, params, rng, extreme=True):
-    """Bounded-error readings (``inf`` beyond d_max); errors often at their bounds."""
-    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0)
-    unit = rng.uniform(-1, 1, size=d.shape)
-    if extreme:
-        unit = np.where(rng.random(d.shape) < 0.5, np.sign(unit), unit)
-    m = np.maximum(d + unit * bound, 0.0)
-    return np.where(d > params.d_max_m, np.inf, m)
-
-
-def _random_map(rng):
-    """A 10 m x 10 m room (boundary polygon) with 3 to 10 random wall pieces inside."""
-    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
-    walls = np.stack([outer, np.roll(outer, -1, axis=0)], axis=1)
-    start = rng.uniform(0.5, 9.5, size=(rng.integers(3, 11), 2))
-    angle = rng.uniform(-np.pi, np.pi, size=len(start))
-    length = rng.uniform(0.2, 3.0, size=len(start))
-    end = np.clip(start + length[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1), 0.1, 9.9)
-    return np.concatenate([walls, np.stack([start, end], axis=1)]), outer
-
-
-def _boxes_around(truth, rng, count):
-    """Boxes ``(count, 3, 2)`` that contain ``truth``, widths from 1e-6 to 2 m / 2 pi rad."""
-    w = np.exp(rng.uniform(np.log(1e-6), np.log(2.0), size=(count, 3)))
-    w[:, 2] = np.exp(rng.uniform(np.log(1e-6), np.log(2 * np.pi), size=count))
-    frac = rng.uniform(0, 1, size=(count, 3))
-    frac[: count // 5] = rng.choice([0.0, 1.0], size=(count // 5, 3))  # truth on a face
-    lo = truth - frac * w
-    return np.stack([lo, np.maximum(lo + w, truth)], axis=-1)
 
 
 @pytest.mark.parametrize("echoes_never_lost", [True, False])
@@ -69,11 +33,11 @@ def test_boxes_holding_the_truth_are_never_rejected(echoes_never_lost):
     belt = SonarBelt.from_params(PARAMS, echoes_never_lost=echoes_never_lost)
     kept = rejected_far = tested_far = 0
     for _ in range(150):
-        segments, outer = _random_map(rng)
+        segments, outer = random_room(rng)
         truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
-        readings = _readings(_distances(truth, segments), PARAMS, rng)
+        readings = bounded_readings(cone_ranges(truth, segments), PARAMS, rng)
         scan = SonarScan(segments, belt, readings, outer)
-        boxes = _boxes_around(truth, rng, 60)
+        boxes = boxes_around(truth, rng, 60)
         verdict = box_test(boxes, scan, q=0)
         assert np.all(verdict != OUTSIDE), boxes[verdict == OUTSIDE][:3]
         kept += boxes.shape[0]
@@ -92,17 +56,18 @@ def test_q_relaxation_keeps_the_truth_with_k_outliers():
     rng = np.random.default_rng(5)
     belt = SonarBelt.from_params(PARAMS, echoes_never_lost=True)
     for trial in range(120):
-        segments, outer = _random_map(rng)
+        segments, outer = random_room(rng)
         truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
-        readings = _readings(_distances(truth, segments), PARAMS, rng)
+        readings = bounded_readings(cone_ranges(truth, segments), PARAMS, rng)
         k = 1 + trial % 3
         bad = rng.choice(PARAMS.count, size=k, replace=False)
         readings[bad] = np.where(rng.random(k) < 0.3, np.inf, rng.uniform(0, PARAMS.d_max_m, k))
         scan = SonarScan(segments, belt, readings, outer)
-        boxes = _boxes_around(truth, rng, 40)
+        boxes = boxes_around(truth, rng, 40)
         assert np.all(box_test(boxes, scan, q=k) != OUTSIDE)
 
 
+@pytest.mark.slow
 def test_inner_boxes_hold_only_consistent_poses():
     """Inner boxes from SIVIA (inner test on): 200 poses sampled in each are consistent."""
     rng = np.random.default_rng(8)
@@ -112,9 +77,9 @@ def test_inner_boxes_hold_only_consistent_poses():
     )
     inner_total = 0
     for _ in range(4):
-        segments, outer = _random_map(rng)
+        segments, outer = random_room(rng)
         truth = np.array([*rng.uniform(1, 9, 2), rng.uniform(-np.pi, np.pi)])
-        readings = _readings(_distances(truth, segments), PARAMS, rng, extreme=False)
+        readings = bounded_readings(cone_ranges(truth, segments), PARAMS, rng, extreme=False)
         scan = SonarScan(segments, wide, readings, outer)
         prior = np.stack([truth - [0.2, 0.2, 0.05], truth + [0.2, 0.2, 0.05]], axis=-1)
         paving = localize(scan, prior, eps=0.03, inner=True)
@@ -125,7 +90,7 @@ def test_inner_boxes_hold_only_consistent_poses():
             continue
         u = rng.uniform(size=(inner.shape[0], 200, 3))
         poses = inner[:, None, :, 0] + u * (inner[:, None, :, 1] - inner[:, None, :, 0])
-        d = _distances(poses, segments)
+        d = cone_ranges(poses, segments)
         lo, hi = scan.ranges[:, 0], scan.ranges[:, 1]
         ok = np.where(np.isfinite(readings), (d >= lo) & (d <= hi), d > wide.d_max_m)
         assert np.all(ok)
@@ -161,7 +126,7 @@ def test_global_localisation_in_hall_keeps_the_truth_and_narrows():
     rng = np.random.default_rng(2)
     for truth in ([3.1, 2.7, 0.4], [6.8, 5.2, -2.0], [8.5, 1.0, 2.5]):
         truth = np.array(truth)
-        readings = _readings(_distances(truth, hall.segments), PARAMS, rng)
+        readings = bounded_readings(cone_ranges(truth, hall.segments), PARAMS, rng)
         scan = SonarScan(hall.segments, belt, readings, hall.boundary)
         paving = localize(scan, _global_box(hall), eps=0.05)
         assert paving.contains(truth[None])[0]
@@ -195,10 +160,10 @@ def test_global_localisation_in_symmetric_keeps_the_twin():
             ]
         )
         images[:, 2] = np.mod(images[:, 2] + np.pi, 2 * np.pi) - np.pi
-        readings = _readings(_distances(truth, room.segments), PARAMS, rng)
+        readings = bounded_readings(cone_ranges(truth, room.segments), PARAMS, rng)
         scan = SonarScan(room.segments, belt, readings, room.boundary)
-        d_images = _distances(images, room.segments)
-        np.testing.assert_allclose(d_images[0], _distances(truth, room.segments), atol=1e-9)
+        d_images = cone_ranges(images, room.segments)
+        np.testing.assert_allclose(d_images[0], cone_ranges(truth, room.segments), atol=1e-9)
         lo, hi = scan.ranges[:, 0], scan.ranges[:, 1]
         consistent = np.all(
             np.where(np.isfinite(readings), (d_images >= lo) & (d_images <= hi), d_images > 3.0),
@@ -264,7 +229,9 @@ def _hall_scan_with_outliers(truth, seed, outliers, shift_m):
     """A scan in ``hall`` at ``truth`` whose first ``outliers`` echoes are moved by
     ``shift_m``, and the prior box ``truth +- (0.5 m, 0.5 m, 0.2 rad)``."""
     hall = builtin_map("hall")
-    readings = _readings(_distances(truth, hall.segments), PARAMS, np.random.default_rng(seed))
+    readings = bounded_readings(
+        cone_ranges(truth, hall.segments), PARAMS, np.random.default_rng(seed)
+    )
     moved = np.flatnonzero(np.isfinite(readings))[:outliers]
     readings[moved] += shift_m
     scan = SonarScan(hall.segments, SonarBelt.from_params(PARAMS), readings, hall.boundary)

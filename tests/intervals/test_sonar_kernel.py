@@ -36,7 +36,10 @@ from intervals.sonar import (
 )
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
-from tests.intervals.test_sonar import PARAMS, _boxes_around, _distances, _random_map, _readings
+from robotsim.sensors.sonar import SonarBeltParams
+from tests.helpers import bounded_readings, boxes_around, cone_ranges, random_room
+
+PARAMS = SonarBeltParams.default_belt()
 
 
 def _random_belt(rng) -> tuple[SonarBelt, object]:
@@ -85,19 +88,20 @@ def _special_boxes(truth, rng) -> np.ndarray:
 
 def _case(rng):
     """``(scan, boxes (180, 3, 2))`` for a random map, pose, belt and readings."""
-    segments, outer = _random_map(rng)
+    segments, outer = random_room(rng)
     belt, params = _random_belt(rng)
     truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
-    readings = _readings(_distances(truth, segments, params), params, rng)
+    readings = bounded_readings(cone_ranges(truth, segments, params), params, rng)
     if rng.random() < 0.5:
         readings = _faulty(readings, params.d_max_m, rng)
     scan = SonarScan(segments, belt, readings, outer)
-    near = _boxes_around(truth, rng, 60)
+    near = boxes_around(truth, rng, 60)
     away = near.copy()
     away[:, :, :] += (rng.uniform(-1, 1, (60, 3)) * [1.0, 1.0, 1.0])[:, :, None]
     return scan, np.concatenate([near, away, _special_boxes(truth, rng)])
 
 
+@pytest.mark.slow
 def test_compiled_verdicts_equal_the_numpy_reference():
     """200 random cases x 180 boxes: per-sensor reject / certain and the box verdicts at
     q = 0..3 agree everywhere; the cases reach every kind of reading and verdict."""
@@ -147,7 +151,7 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
         belt, _ = _random_belt(rng)
         truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
         boxes = np.ascontiguousarray(
-            np.concatenate([_boxes_around(truth, rng, 20), _special_boxes(truth, rng)])
+            np.concatenate([boxes_around(truth, rng, 20), _special_boxes(truth, rng)])
         )
         reference = _sensor_boxes(boxes, belt)
         cos_theta, sin_theta = _heading_trig(boxes)
@@ -190,7 +194,7 @@ def test_paving_and_tracking_agree_between_engines():
     previous = dict.fromkeys(ENGINES)
     for truth in ([2.0, 6.0, 3.1], [5.0, 3.0, -3.1], [5.2, 3.1, -2.8]):
         truth = np.array(truth)
-        readings = _readings(_distances(truth, hall.segments), PARAMS, rng)
+        readings = bounded_readings(cone_ranges(truth, hall.segments), PARAMS, rng)
         readings[3] = 0.5  # an outlier
         scan = SonarScan(hall.segments, belt, readings, hall.boundary)
         prior = np.stack([truth - [0.4, 0.4, 0.2], truth + [0.4, 0.4, 0.2]], axis=-1)

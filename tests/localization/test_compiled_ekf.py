@@ -30,7 +30,6 @@ from localization.motion_models import (
     pose_jacobian,
     pose_model,
 )
-from tests.localization.test_compiled_ukf import assert_close, random_belief
 
 EKF = ExtendedKalmanFilter()
 DT_S = 0.1
@@ -77,7 +76,7 @@ def test_jacobian_kernels_match_the_numpy_jacobians(name):
     reference = motion.jacobian(states, DT_S)
     out = np.empty((motion.n, motion.n))
     args = np.array([DT_S])
-    for state, expected in zip(states, reference):
+    for state, expected in zip(states, reference, strict=True):
         out[:] = np.nan
         motion.jacobian_point(state, args, out)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-13 * np.abs(expected).max())
@@ -95,7 +94,7 @@ def test_leading_entries_jacobian_kernel():
 
 
 @pytest.mark.parametrize("name", sorted(MODELS))
-def test_predict_matches_numpy_path(name):
+def test_predict_matches_numpy_path(name, random_belief, assert_close):
     motion = MODELS[name]
     compiled = additive_model(motion)
     assert compiled.jacobian_point is motion.jacobian_point
@@ -114,7 +113,7 @@ def test_predict_matches_numpy_path(name):
 
 
 @pytest.mark.parametrize("measurement", ["pose", "gps"])
-def test_update_matches_numpy_path(measurement):
+def test_update_matches_numpy_path(measurement, random_belief, assert_close):
     motion = MODELS["CTRV"]
     compiled = (
         pose_model(np.diag([0.3, 0.2, 0.05]))
@@ -137,7 +136,7 @@ def test_update_matches_numpy_path(measurement):
 
 
 @pytest.mark.parametrize("name", ["CTRV", "CCA"])
-def test_a_filter_run_matches_the_numpy_filter(name):
+def test_a_filter_run_matches_the_numpy_filter(name, assert_close):
     """Fifty predict + pose updates of one filter, turning through +-pi: the paths stay within
     rounding of each other (the errors do not grow)."""
     motion = MODELS[name]
@@ -154,13 +153,16 @@ def test_a_filter_run_matches_the_numpy_filter(name):
         beliefs = [
             EKF.update(EKF.predict(b, p, DT_S), z, mm)
             for b, p, mm in zip(
-                beliefs, (process, numpy_twin(process)), (measurement, numpy_twin(measurement))
+                beliefs,
+                (process, numpy_twin(process)),
+                (measurement, numpy_twin(measurement)),
+                strict=True,
             )
         ]
     assert_close(*beliefs)
 
 
-def test_per_run_arguments_and_noise():
+def test_per_run_arguments_and_noise(random_belief, assert_close):
     motion = MODELS["CTRA"]
     rng = np.random.default_rng(2)
     belief = random_belief(rng, motion.n, 10, motion.angle_indices)
@@ -176,7 +178,7 @@ def test_per_run_arguments_and_noise():
     )
 
 
-def test_iterated_filter_predicts_on_the_compiled_path():
+def test_iterated_filter_predicts_on_the_compiled_path(random_belief):
     motion = MODELS["CTRV"]
     compiled = additive_model(motion)
     belief = random_belief(np.random.default_rng(6), motion.n, 5, motion.angle_indices)
@@ -184,7 +186,7 @@ def test_iterated_filter_predicts_on_the_compiled_path():
     np.testing.assert_array_equal(iekf.mean, EKF.predict(belief, compiled, DT_S).mean)
 
 
-def test_non_finite_inputs_fall_back_with_the_numpy_errors():
+def test_non_finite_inputs_fall_back_with_the_numpy_errors(random_belief):
     motion = MODELS["CTRV"]
     compiled = additive_model(motion)
     belief = random_belief(np.random.default_rng(8), motion.n, 3, motion.angle_indices)
@@ -198,7 +200,7 @@ def test_non_finite_inputs_fall_back_with_the_numpy_errors():
     assert not takes_compiled_path(broken, compiled, DT_S)
     for model in (compiled, numpy_twin(compiled)):
         with pytest.raises(
-            EstimationError, match="EKF predict: the predicted mean .* is not finite"
+            EstimationError, match=r"EKF predict: the predicted mean .* is not finite"
         ):
             EKF.predict(broken, model, DT_S)
     z = np.zeros((3, 3))
@@ -214,7 +216,7 @@ def test_non_finite_inputs_fall_back_with_the_numpy_errors():
             EKF.update(broken, np.zeros((3, 3)), model)
 
 
-def test_non_positive_definite_covariances():
+def test_non_positive_definite_covariances(random_belief, assert_close):
     """A non-PD ``P`` needs no factor in the EKF: the compiled step takes it and agrees with
     numpy. An ``S`` that is not PD declines, and the numpy step (LU solve) gives the result."""
     motion = MODELS["CTRV"]
@@ -261,7 +263,8 @@ def damped_jacobian(x, k, dt_s):
     return diagonal[..., None] * np.eye(x.shape[-1])
 
 
-def test_user_kernels_are_compiled_once_and_match():
+@pytest.mark.slow
+def test_user_kernels_are_compiled_once_and_match(assert_close):
     compiled = ProcessModel(
         damped,
         0.01 * np.eye(3),
@@ -299,12 +302,12 @@ def test_kernels_that_do_not_fit_give_one_clear_error():
     ):
         EKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, 0.5, DT_S)
     with pytest.raises(
-        EstimationError, match="jacobian_point must be a numba.njit-compiled function"
+        EstimationError, match=r"jacobian_point must be a numba\.njit-compiled function"
     ):
         MeasurementModel(lambda x: x, np.eye(2), jacobian_point=lambda x, args, out: None)
 
 
-def test_steps_the_compiled_path_cannot_take_use_the_numpy_path():
+def test_steps_the_compiled_path_cannot_take_use_the_numpy_path(random_belief):
     """Batches of two axes and models without a kernel or the numpy Jacobian go to numpy."""
     motion = MODELS["CV"]
     compiled = additive_model(motion)

@@ -30,29 +30,11 @@ from localization.ukf import UnscentedKalmanFilter
 
 UKF = UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.5))
 DT_S = 0.1
-RTOL = 1e-12
 
 
 def numpy_twin(model):
     """The same model without its kernel: the UKF then takes the numpy path."""
     return dataclasses.replace(model, point=None)
-
-
-def random_belief(rng: np.random.Generator, n: int, runs: int, angles: tuple[int, ...]) -> Gaussian:
-    """Beliefs over ``runs`` runs: moving, turning both ways (some nearly straight), headings
-    within 0.05 rad of +-pi, random well-conditioned covariances."""
-    mean = rng.normal(size=(runs, n))
-    mean[:, 3] = rng.uniform(0.5, 10.0, runs)  # a speed (CV: vx) well away from 0
-    mean[::3, -1] *= 1e-9  # omega, c or vy near 0: the series branches
-    for a in angles:
-        mean[:, a] = np.where(rng.random(runs) < 0.5, math.pi, -math.pi) - rng.uniform(
-            -0.05, 0.05, runs
-        )
-    root = rng.normal(size=(runs, n, n)) * 0.2
-    cov = root @ root.mT + 0.05 * np.eye(n)
-    if angles:
-        cov[:, angles[0], angles[0]] += 0.5  # heading sigma points cross +-pi
-    return Gaussian(mean, cov, angles)
 
 
 def compiled_step_runs(belief: Gaussian, model, *args) -> bool:
@@ -76,17 +58,6 @@ def compiled_step_runs(belief: Gaussian, model, *args) -> bool:
     return done is not None
 
 
-def assert_close(
-    ours: Gaussian, reference: Gaussian, atol: float = 0.0, rtol: float = RTOL
-) -> None:
-    residual = reference.residual(ours.mean)  # angles wrapped: +pi and -pi are the same heading
-    scale = np.abs(reference.mean).max() + 1.0
-    np.testing.assert_allclose(residual, 0.0, atol=atol + rtol * scale)
-    np.testing.assert_allclose(
-        ours.cov, reference.cov, atol=atol + rtol * np.abs(reference.cov).max(), rtol=0
-    )
-
-
 def process_models(motion, noise: str) -> ProcessModel:
     if noise == "additive":
         return motion.process_model(np.diag(np.linspace(0.01, 0.05, motion.n)))
@@ -95,7 +66,7 @@ def process_models(motion, noise: str) -> ProcessModel:
 
 @pytest.mark.parametrize("noise", ["additive", "augmented"])
 @pytest.mark.parametrize("name", sorted(MODELS))
-def test_predict_matches_numpy_path(name, noise):
+def test_predict_matches_numpy_path(name, noise, random_belief, assert_close):
     motion = MODELS[name]
     compiled = process_models(motion, noise)
     assert compiled.point is not None
@@ -115,7 +86,7 @@ def test_predict_matches_numpy_path(name, noise):
 
 
 @pytest.mark.parametrize("measurement", ["pose", "gps"])
-def test_update_matches_numpy_path(measurement):
+def test_update_matches_numpy_path(measurement, random_belief, assert_close):
     motion = MODELS["CTRV"]
     compiled = (
         pose_model(np.diag([0.3, 0.2, 0.05]))
@@ -138,7 +109,7 @@ def test_update_matches_numpy_path(measurement):
         np.testing.assert_array_equal(single.cov, batched.cov[run])
 
 
-def test_tiny_alpha_within_the_finite_difference_rounding():
+def test_tiny_alpha_within_the_finite_difference_rounding(random_belief, assert_close):
     """alpha = 1e-3 (issue 3's benchmark): the mean's second-order term carries a rounding of
     about ``eps |y| / gamma^2`` in both paths, differently rounded; the rest agrees to 1e-12."""
     ukf = UnscentedKalmanFilter(ScaledSigmaPoints(alpha=1e-3))
@@ -155,7 +126,7 @@ def test_tiny_alpha_within_the_finite_difference_rounding():
     )
 
 
-def test_per_run_arguments_and_noise():
+def test_per_run_arguments_and_noise(random_belief, assert_close):
     """Per-run ``dt_s (B,)`` and per-run ``Q (B, n, n)`` are packed per run."""
     motion = MODELS["CTRA"]
     rng = np.random.default_rng(2)
@@ -172,7 +143,7 @@ def test_per_run_arguments_and_noise():
     )
 
 
-def test_non_positive_definite_falls_back_to_the_policy():
+def test_non_positive_definite_falls_back_to_the_policy(random_belief):
     """A non-PD covariance: the compiled step declines and the numpy step applies the policy,
     with the same error, the same warning and the same repaired result."""
     motion = MODELS["CTRV"]
@@ -205,7 +176,7 @@ def test_non_positive_definite_falls_back_to_the_policy():
         UKF.update(broken, z, measurement)
 
 
-def test_non_finite_inputs_refused_as_by_the_numpy_path():
+def test_non_finite_inputs_refused_as_by_the_numpy_path(random_belief):
     motion = MODELS["CTRV"]
     compiled = process_models(motion, "additive")
     belief = random_belief(np.random.default_rng(8), motion.n, 3, motion.angle_indices)
@@ -233,7 +204,8 @@ def damped(x, k, dt_s):
     return x * np.exp(-np.asarray(k)[..., None] * dt_s) + np.sin(x) * dt_s
 
 
-def test_user_kernel_is_compiled_once_and_matches():
+@pytest.mark.slow
+def test_user_kernel_is_compiled_once_and_matches(assert_close):
     compiled = ProcessModel(damped, 0.01 * np.eye(3), point=damped_point)
     belief = Gaussian(
         np.array([[0.5, -1.0, 2.0], [0.1, 0.2, 0.3]]), np.broadcast_to(0.2 * np.eye(3), (2, 3, 3))
@@ -257,11 +229,11 @@ def test_kernel_that_does_not_fit_gives_one_clear_error():
         EstimationError, match="UKF predict: the kernel two_arguments does not compile"
     ):
         UKF.predict(Gaussian(np.zeros(2), np.eye(2)), model, DT_S)
-    with pytest.raises(EstimationError, match="point must be a numba.njit-compiled function"):
+    with pytest.raises(EstimationError, match=r"point must be a numba\.njit-compiled function"):
         MeasurementModel(lambda x: x, np.eye(2), point=lambda x, args, out: None)
 
 
-def test_steps_the_compiled_path_cannot_take_use_the_numpy_path():
+def test_steps_the_compiled_path_cannot_take_use_the_numpy_path(random_belief):
     """Arguments that are not numbers and batches of two axes go to the numpy path unchanged."""
     motion = MODELS["CV"]
     compiled = process_models(motion, "additive")

@@ -1,6 +1,7 @@
 """The dead-reckoning filter on simulated logs: closed-form motions, tracking with a drift
-that grows with time, covariance consistency (NEES), the compiled step against C's generic
-filters (the reference), batched against looped, and its refusals."""
+that grows with time, covariance consistency (NEES), the compiled step against the generic
+filter classes of ``localization`` (``UnscentedKalmanFilter`` and its siblings stepped one
+sample at a time: the reference), batched against looped, and its refusals."""
 
 from __future__ import annotations
 
@@ -175,7 +176,7 @@ def test_wheel_radius_difference_and_biases_are_learned(seed):
 
 
 @pytest.mark.parametrize("name", ["ukf", "iukf", "ekf", "iekf"])
-def test_compiled_step_equals_c_filters(route_logs, name):
+def test_compiled_step_equals_the_generic_filters(route_logs, name):
     logs = route_logs[:2]
     steps = 301
     ticks = np.stack([log.wheel_ticks[:steps] for log in logs], axis=1)  # per-run data (N, 2, 2)
@@ -221,7 +222,9 @@ def assert_same_history(compiled, generic, mean_atol, cov_rtol):
 @pytest.mark.parametrize(
     "name, tolerance", [("ukf", 1e-8), ("ekf", 1e-11)]
 )  # ~3e-9 and ~1e-13 seen
-def test_compiled_step_equals_c_filters_across_the_heading_wrap(route_logs, name, tolerance):
+def test_compiled_step_equals_the_generic_filters_across_the_heading_wrap(
+    route_logs, name, tolerance
+):
     # headings start at the edges of [-pi, pi) and turn across them; the data are shared by
     # the batch (the other comparison uses per-run data)
     data = data_of(route_logs[2])
@@ -386,7 +389,7 @@ def test_a_mean_that_is_not_finite_is_refused_naming_the_sample(route_logs, name
     accel = np.array(data.accel_input_m_s2)
     accel[40] = np.nan  # past odometry_data's checks: OdometryData built by hand
     broken = dataclasses.replace(data, accel_input_m_s2=accel)
-    with pytest.raises(EstimationError, match="at sample 40 .* the mean not finite"):
+    with pytest.raises(EstimationError, match=r"at sample 40 .* the mean not finite"):
         DeadReckoning(
             broken, initial_belief(START, [0.01] * 3), DeadReckoningSettings(filter=name)
         ).run(60)
@@ -425,10 +428,11 @@ def long_hall_runs():
     return spec, logs, noise, history
 
 
+@pytest.mark.slow
 def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_raw_gyro(
     long_hall_runs,
 ):
-    spec, logs, noise, history = long_hall_runs
+    spec, logs, _, history = long_hall_runs
     gyro = logs[0].sensors.gyro
     for b, log in enumerate(logs):
         t = log.t_s
@@ -451,6 +455,7 @@ def test_long_run_heading_stays_within_the_declared_gyro_figures_and_beats_the_r
         )
 
 
+@pytest.mark.slow
 def test_long_run_gyro_bias_estimate_stays_near_the_truth(long_hall_runs):
     _, logs, noise, history = long_hall_runs
     for b, log in enumerate(logs):

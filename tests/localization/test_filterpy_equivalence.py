@@ -80,7 +80,7 @@ def _assert_same(ours, theirs):
     assert headings.max() > 2.5 and headings.min() < -2.5, (
         "the heading must cross +-pi in this test"
     )
-    for (m, p), (fm, fp) in zip(ours, theirs):
+    for (m, p), (fm, fp) in zip(ours, theirs, strict=True):
         np.testing.assert_allclose(_residual(m, fm), 0.0, atol=1e-10)
         np.testing.assert_allclose(p, fp, rtol=0, atol=1e-10)
 

@@ -97,7 +97,7 @@ def test_tiny_alpha_still_equals_the_kalman_filter():
 
 
 def test_augmented_noise_equals_additive_noise_on_a_linear_model():
-    x0, p0, a, q, h, r, zs, process, measurement = linear_problem(3, 3, 2)
+    x0, p0, a, q, _, _, zs, process, measurement = linear_problem(3, 3, 2)
     augmented = ProcessModel(lambda x, w: x @ a.T + w, q, noise="augmented")
     kf = UnscentedKalmanFilter(ScaledSigmaPoints(alpha=0.3))
     additive_belief = augmented_belief = Gaussian(x0, p0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -68,7 +70,7 @@ def test_slices_cover_the_batch_evenly_and_only_when_they_can():
     parts = run_slices((RUNS,), np.eye(2))
     sizes = [p.stop - p.start for p in parts]
     assert parts[0].start == 0 and parts[-1].stop == RUNS
-    assert all(a.stop == b.start for a, b in zip(parts[:-1], parts[1:]))
+    assert all(a.stop == b.start for a, b in itertools.pairwise(parts))
     assert max(sizes) <= SLICE_RUNS and max(sizes) - min(sizes) <= 1
     assert run_slices((SLICE_RUNS,), np.eye(2)) is None  # short enough
     assert run_slices((RUNS,), np.broadcast_to(np.eye(2), (RUNS, 2, 2))) is None  # per-run noise

@@ -50,7 +50,7 @@ def test_slip_noise_has_the_declared_relative_std():
 
 
 def test_slip_changes_the_ticks_of_a_run():
-    common = dict(start_pose=(3.0, 4.0, 0.0), duration_s=5.0, rng=np.random.default_rng(1))
+    common = {"start_pose": (3.0, 4.0, 0.0), "duration_s": 5.0, "rng": np.random.default_rng(1)}
     profile = ScriptedProfile([0.0], [0.3], [0.0])
     clean = simulate(builtin_map("hall"), profile, **common)
     common["rng"] = np.random.default_rng(1)

@@ -64,12 +64,13 @@ def test_turn_on_bias_is_constant_in_a_run_and_spread_as_declared(kind, std):
     assert abs(spread.mean()) < 4 * std / np.sqrt(spread.size)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("kind", "walk"), [("gyro", 3e-5), ("accel", 5e-4)])
 def test_bias_random_walk_variance_grows_linearly(kind, walk):
     runs = 4000
     samples = 1001  # 10 s
     truth = np.zeros((samples, runs, 2)) if kind == "accel" else np.zeros((samples, runs))
-    measured, bias = simulate(kind, truth, 3, walk=walk)
+    _, bias = simulate(kind, truth, 3, walk=walk)
     assert np.all(bias[0] == 0.0)
     for t_s in (2.5, 10.0):
         spread = bias[int(t_s * RATE_HZ)].ravel()

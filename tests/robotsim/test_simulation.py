@@ -146,7 +146,7 @@ def test_wall_contacts_come_from_pymunk_and_progress_is_reported():
     ],
 )
 def test_bad_run_settings_are_refused(settings, words):
-    arguments = dict(start_pose=(1.0, 1.0, 0.0), duration_s=5.0, rng=np.random.default_rng(0))
+    arguments = {"start_pose": (1.0, 1.0, 0.0), "duration_s": 5.0, "rng": np.random.default_rng(0)}
     arguments.update(settings)
     with pytest.raises(RobotsimError, match=words):
         simulate(HALL, ROUTE, **arguments)

@@ -54,6 +54,7 @@ def random_segments(rng, count, near):
     return np.stack([centre - half, centre + half], axis=1)
 
 
+@pytest.mark.slow
 def test_cone_distance_matches_brute_force_sampling():
     rng = np.random.default_rng(20261122)
     cases = 0

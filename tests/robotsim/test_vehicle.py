@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from robotsim.errors import RobotsimError
-from robotsim.vehicle.drives import DRIVES, LANE_WIDTH_M, _Profile, highway_drive, urban_drive
+from robotsim.vehicle.drives import (
+    DRIVES,
+    LANE_WIDTH_M,
+    ManoeuvreProfile,
+    highway_drive,
+    urban_drive,
+)
 from robotsim.vehicle.sensors import VehicleSensorParams, measure
 from robotsim.vehicle.single_track import VehicleParams, integrate_single_track
 
@@ -92,7 +98,7 @@ def test_highway_drive_is_fast_with_gentle_curves(drives):
 
 
 def test_lane_change_moves_one_lane_and_restores_the_heading():
-    p = _Profile(100.0, 30.0, VehicleParams())
+    p = ManoeuvreProfile(100.0, 30.0, VehicleParams())
     p.hold(1.0)
     p.lane_change(LANE_WIDTH_M, 5.0)
     p.hold(1.0)
@@ -160,6 +166,7 @@ def test_bad_settings_are_refused_with_a_clear_message():
         )
 
 
+@pytest.mark.slow
 def test_robotsim_vehicle_does_not_import_localization():
     code = (
         "import sys, robotsim.vehicle.drives, robotsim.vehicle.sensors; "

@@ -35,7 +35,7 @@ def test_free_space_motion_follows_commanded_wheel_speeds_with_true_radii():
     wheels = wheel_rates(np.column_stack([v, omega]), ROBOT.nominal_radii_m, ROBOT.wheel_base_m)
     expected_velocity = body_velocity(wheels, ROBOT.true_radii_m, ROBOT.wheel_base_m)
     assert not np.allclose(expected_velocity, np.column_stack([v, omega]), atol=1e-3)
-    for start_s, (v_true, omega_true) in zip([2.0, 6.0, 10.0], expected_velocity):
+    for start_s, (v_true, omega_true) in zip([2.0, 6.0, 10.0], expected_velocity, strict=True):
         window = slice(int(start_s * 100), int((start_s + 2.0) * 100) + 1)
         np.testing.assert_allclose(log.velocity[window], [[v_true, omega_true]] * 201, atol=1e-6)
         # the pose moves along the arc of the true-radii kinematics
@@ -62,6 +62,32 @@ def test_robot_driven_into_a_wall_stops_at_it(heading):
     if heading == 0.0:  # head-on: pressed against the wall, it cannot move towards it
         x_speed = np.diff(log.pose[-100:, 0]) * log.rate_hz
         assert np.abs(x_speed).max() < 1e-3
+
+
+def test_wall_contact_callback_fires_only_while_the_robot_touches_a_wall():
+    # hall: east wall at x = 10; driven east from x = 9, then stopped after 3 s
+    world = World(builtin_map("hall"), ROBOT, (9.0, 3.5, 0.0))
+    contacts: list[int] = []  # the step of each solved contact
+    world.on_wall_contact(lambda: contacts.append(step))
+    gap_m = []  # distance from the disk's edge (plus the wall's radius) to the wall, per step
+    for step in range(400):
+        world.step(0.5 if step < 300 else 0.0, 0.0)
+        gap_m.append(10.0 - world.state()[0] - ROBOT.radius_m - WorldParams().wall_radius_m)
+    assert contacts
+    first = min(contacts)
+    assert gap_m[first] < 2e-3 and min(gap_m[: first - 1]) > 1e-3  # at the wall, not before
+    assert set(range(first, 300)) <= set(contacts)  # every step while driven into it
+    replaced: list[None] = []
+    world.on_wall_contact(lambda: replaced.append(None))  # a later callback replaces the first
+    count = len(contacts)
+    world.step(0.5, 0.0)  # driven into the wall again
+    assert replaced and len(contacts) == count
+    free = World(builtin_map("hall"), ROBOT, (5.0, 3.5, 0.0))
+    free_contacts: list[None] = []
+    free.on_wall_contact(lambda: free_contacts.append(None))
+    for _ in range(100):
+        free.step(0.3, 0.2)
+    assert not free_contacts  # nothing in free space
 
 
 def test_kidnap_moves_the_robot_without_odometry():

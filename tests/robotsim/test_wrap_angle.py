@@ -39,7 +39,7 @@ def test_wrap_angle_stays_in_the_half_open_range_at_the_edges(wrap):
     turns = (EDGES - wrapped) / (2.0 * math.pi)
     np.testing.assert_allclose(turns, np.round(turns), atol=1e-12)
     # one scalar at a time gives the same numbers, as numpy floats
-    for angle, expected in zip(EDGES, wrapped):
+    for angle, expected in zip(EDGES, wrapped, strict=True):
         scalar = wrap(float(angle))
         assert np.ndim(scalar) == 0 and float(scalar) == expected
     assert wrap(np.nextafter(-math.pi, -np.inf)) == -math.pi

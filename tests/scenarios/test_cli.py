@@ -17,6 +17,8 @@ from scenarios.spec import builtin_names, load_scenario
 
 ROBOTSIM = str(Path(sys.executable).with_name("robotsim"))
 
+pytestmark = pytest.mark.slow  # every test runs the console script in a subprocess
+
 
 def robotsim(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run([ROBOTSIM, *args], cwd=cwd, capture_output=True, text=True, timeout=120)

@@ -73,7 +73,9 @@ def check_sound_fusion(estimation):
 
 
 @pytest.mark.parametrize("name", builtin_names())
-@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+@pytest.mark.parametrize(
+    "seed", [1, 2, *(pytest.param(seed, marks=pytest.mark.slow) for seed in (3, 4, 5))]
+)
 def test_bounded_errors_and_at_most_q_outliers_keep_the_truth_in_the_set(name, seed):
     spec = load_scenario(name).with_run(seed=seed, duration_s=SHORT_S)
     # seeds 2 and 3 add the ray test (intervals.rays) to the box test, at q_max 1 and 2
@@ -205,6 +207,7 @@ def test_bad_estimation_settings_exit_2_with_one_line_and_no_output(tmp_path, ca
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_reproduce_ia_fusion_short_run(tmp_path):
     out = tmp_path / "ia"
     assert (

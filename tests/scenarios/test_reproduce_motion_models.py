@@ -35,6 +35,7 @@ def short_run(tmp_path_factory):
     return status, out
 
 
+@pytest.mark.slow
 def test_outputs_are_written_and_parseable(short_run):
     status, out = short_run
     assert status == 0
@@ -61,6 +62,7 @@ def test_outputs_are_written_and_parseable(short_run):
     assert not list(out.parent.glob(".*.part"))
 
 
+@pytest.mark.slow
 def test_curvilinear_models_beat_cv_in_the_city(short_run):
     """The ordering that holds robustly (paper 001 table II and figure 5): yaw rate helps."""
     _, out = short_run
@@ -75,12 +77,14 @@ def test_curvilinear_models_beat_cv_in_the_city(short_run):
     assert table["findings"]["urban"]["curvilinear_beat_cv"] is True
 
 
+@pytest.mark.slow
 def test_same_seed_gives_the_same_table():
     a = mm_repro.experiment(runs=2, seed=5, duration_s=25.0)
     b = mm_repro.experiment(runs=2, seed=5, duration_s=25.0)
     assert a["table"] == b["table"]
 
 
+@pytest.mark.slow
 def test_tiny_alpha_agrees_with_a_moderate_alpha():
     """alpha = 1e-5 (centre weight about -2e10) gives the same estimates as alpha = 1e-3:
     the local frame and the moments about the centre point keep the rounding in check."""

@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from scenarios.cli import main
 
 
+@pytest.mark.slow
 def test_mukf_example_writes_its_table_and_figures(tmp_path):
     out = tmp_path / "mukf"
     assert (

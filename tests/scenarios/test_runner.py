@@ -53,6 +53,7 @@ def test_summary_figures_match_the_log(hall_runs):
     assert summary["sensors"]["encoders"]["ticks_total"] == log.wheel_ticks.sum(axis=0).tolist()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
 def test_builtin_routes_stay_clear_of_the_walls_for_the_whole_run(name):
     spec = load_scenario(name)

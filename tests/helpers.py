@@ -1,0 +1,60 @@
+"""Plain helpers shared by test modules: random sonar cases that the modules' own case
+builders call (a fixture cannot be called from a plain function, so these are functions).
+Fixtures live in ``tests/conftest.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+
+#: The default 16-sonar belt (:meth:`SonarBeltParams.default_belt`).
+DEFAULT_BELT = SonarBeltParams.default_belt()
+
+
+def cone_ranges(
+    poses: np.ndarray, segments: np.ndarray, params: SonarBeltParams = DEFAULT_BELT
+) -> np.ndarray:
+    """Exact ranges ``(..., k)`` in m from poses ``(..., 3)`` to the nearest wall in each
+    sensor's cone (robotsim's model: the truth the interval tests must never lose)."""
+    return cone_distances(
+        poses, segments, params.mount_xy, params.mount_angle_rad, params.half_aperture_rad
+    )
+
+
+def bounded_readings(
+    d: np.ndarray, params: SonarBeltParams, rng: np.random.Generator, extreme: bool = True
+) -> np.ndarray:
+    """Readings within their error bounds ``e_abs + e_rel d`` of the ranges ``d`` (``inf``
+    beyond ``d_max``, never negative); with ``extreme`` half of the errors sit exactly on a
+    bound, where an unsound test fails first."""
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0)
+    unit = rng.uniform(-1, 1, size=d.shape)
+    if extreme:
+        unit = np.where(rng.random(d.shape) < 0.5, np.sign(unit), unit)
+    m = np.maximum(d + unit * bound, 0.0)
+    return np.where(d > params.d_max_m, np.inf, m)
+
+
+def random_room(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A 10 m x 10 m room with 3 to 10 random wall pieces inside: ``(segments (S, 2, 2),
+    boundary polygon (4, 2))``, in m."""
+    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
+    walls = np.stack([outer, np.roll(outer, -1, axis=0)], axis=1)
+    start = rng.uniform(0.5, 9.5, size=(rng.integers(3, 11), 2))
+    angle = rng.uniform(-np.pi, np.pi, size=len(start))
+    length = rng.uniform(0.2, 3.0, size=len(start))
+    end = np.clip(start + length[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1), 0.1, 9.9)
+    return np.concatenate([walls, np.stack([start, end], axis=1)]), outer
+
+
+def boxes_around(truth: np.ndarray, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Boxes ``(count, 3, 2)`` that contain the pose ``truth (3,)``: widths from 1e-6 to 2 m
+    and 1e-6 to 2 pi rad (log-uniform), a fifth of them with the truth on a face or corner."""
+    w = np.exp(rng.uniform(np.log(1e-6), np.log(2.0), size=(count, 3)))
+    w[:, 2] = np.exp(rng.uniform(np.log(1e-6), np.log(2 * np.pi), size=count))
+    frac = rng.uniform(0, 1, size=(count, 3))
+    frac[: count // 5] = rng.choice([0.0, 1.0], size=(count // 5, 3))  # truth on a face
+    lo = truth - frac * w
+    return np.stack([lo, np.maximum(lo + w, truth)], axis=-1)
