@@ -96,7 +96,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from enum import StrEnum
 
 import numpy as np
 
@@ -120,6 +120,7 @@ from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
 from localization.ukf import UnscentedKalmanFilter
+from records import validate_fields
 
 STATE_NAMES = (
     "x_m",
@@ -132,7 +133,6 @@ STATE_NAMES = (
     "d_wheel",
 )
 ANGLE_INDICES = (THETA,)
-FILTERS = ("ukf", "iukf", "ekf", "iekf")
 _G_M_S2 = 9.80665
 _WRAP_GAMMA = 0.01  # sigma-point spread from which the compiled step wraps heading offsets
 
@@ -452,52 +452,76 @@ def odometry_data(
 # --------------------------------------------------------------------------- the filters
 
 
+class Filter(StrEnum):
+    """The filter running the dead reckoning (the scenario's ``estimation.filter``)."""
+
+    UKF = "ukf"
+    """Unscented Kalman filter (scaled sigma points ``alpha = 1e-3`` by default)."""
+    IUKF = "iukf"
+    """Iterated UKF (paper 000; kappa sigma points by default)."""
+    EKF = "ekf"
+    """Extended Kalman filter."""
+    IEKF = "iekf"
+    """Iterated EKF."""
+
+    @property
+    def unscented(self) -> bool:
+        """True for the UKF and IUKF (unscented prediction)."""
+        return self in (Filter.UKF, Filter.IUKF)
+
+
+class StepEngine(StrEnum):
+    """How the dead-reckoning steps run."""
+
+    COMPILED = "compiled"
+    """The step specialised to this model (:mod:`localization.dead_reckoning_kernel`)."""
+    GENERIC = "generic"
+    """C's filter objects step by step: the reference, about a hundred times slower."""
+
+
 @dataclass(frozen=True)
 class DeadReckoningSettings:
-    """Which filter runs the dead reckoning.
+    """Which filter runs the dead reckoning, and how (validated at construction).
 
     Attributes:
-        filter: ``"ukf"``, ``"iukf"``, ``"ekf"`` or ``"iekf"`` (the scenario's
-            ``estimation.filter``).
+        filter: a :class:`Filter` (or its value; the scenario's ``estimation.filter``).
         points: sigma points of the unscented filters; ``None`` takes each filter's default
             (scaled points ``alpha = 1e-3`` for the UKF, kappa points for the IUKF, paper 000).
-        engine: ``"compiled"`` (the specialised step, :mod:`localization.dead_reckoning_kernel`,
-            default) or ``"generic"`` (C's filter objects step by step: the reference, about a
-            hundred times slower).
+        engine: a :class:`StepEngine` (or its value): ``"compiled"`` (default) or
+            ``"generic"``.
     """
 
-    filter: Literal["ukf", "iukf", "ekf", "iekf"] = "ukf"
+    filter: Filter = Filter.UKF
     points: SigmaPointScheme | None = None
-    engine: Literal["compiled", "generic"] = "compiled"
+    engine: StepEngine = StepEngine.COMPILED
 
     def __post_init__(self) -> None:
-        if self.filter not in FILTERS:
+        validate_fields(self, EstimationError)
+        if self.points is not None and not isinstance(self.points, SigmaPointScheme):
             raise EstimationError(
-                f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}"
-            )
-        if self.engine not in ("compiled", "generic"):
-            raise EstimationError(
-                f"DeadReckoningSettings: engine must be 'compiled' or 'generic', got {self.engine!r}"
+                f"DeadReckoningSettings.points must be a sigma-point scheme or None, got {self.points!r}"
             )
 
     @property
     def unscented(self) -> bool:
         """True for the UKF and IUKF (unscented prediction)."""
-        return self.filter in ("ukf", "iukf")
+        return self.filter.unscented
 
     def sigma_points(self) -> SigmaPointScheme:
         """The sigma-point scheme in use (unscented filters)."""
         if self.points is not None:
             return self.points
-        return KappaSigmaPoints() if self.filter == "iukf" else ScaledSigmaPoints(alpha=1e-3)
+        return KappaSigmaPoints() if self.filter == Filter.IUKF else ScaledSigmaPoints(alpha=1e-3)
 
     def generic_filter(self):
         """C's filter object for this setting."""
-        if self.filter == "ukf":
+        if self.filter == Filter.UKF:
             return UnscentedKalmanFilter(points=self.sigma_points())
-        if self.filter == "iukf":
+        if self.filter == Filter.IUKF:
             return IteratedUnscentedKalmanFilter(points=self.sigma_points())
-        return ExtendedKalmanFilter() if self.filter == "ekf" else IteratedExtendedKalmanFilter()
+        if self.filter == Filter.EKF:
+            return ExtendedKalmanFilter()
+        return IteratedExtendedKalmanFilter()
 
 
 @dataclass(frozen=True, eq=False)
@@ -574,7 +598,7 @@ class DeadReckoning:
         self._cov = np.array(initial.cov)
         self._record(0)
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
-        if settings.engine == "compiled":
+        if settings.engine == StepEngine.COMPILED:
             self._compiled = _CompiledStep(data, settings)
         else:
             self._generic = settings.generic_filter()
@@ -630,7 +654,7 @@ class DeadReckoning:
             )
         start = self.index + 1
         if until_index >= start:
-            if self.settings.engine == "compiled":
+            if self.settings.engine == StepEngine.COMPILED:
                 self._mean, self._cov, self._speed_correction = self._compiled.run(
                     self._mean,
                     self._cov,

@@ -78,7 +78,7 @@ import numpy as np
 from localization.compiled_linalg import wrap_angle as wrap_angle_scalar
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
-from localization.models import MeasurementModel, ProcessModel
+from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 
 Array = np.ndarray
 """A float array; shapes are given in the docstrings."""
@@ -785,7 +785,9 @@ class MotionModel:
         out[..., driven] += half
         return out
 
-    def process_model(self, Q: Array, noise: str = "additive") -> ProcessModel:
+    def process_model(
+        self, Q: Array, noise: ProcessNoise | str = ProcessNoise.ADDITIVE
+    ) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
 
         ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;
@@ -793,9 +795,9 @@ class MotionModel:
         the increments (e.g. ``np.diag(self.process_noise_std(dt_s) ** 2)``). Either way the
         UKF takes its compiled path (the step's argument is ``dt_s``); additive, the EKF too.
         """
-        if noise == "augmented":
+        if noise == ProcessNoise.AUGMENTED:
             return ProcessModel(
-                self.transition_with_noise, Q, noise="augmented", point=self.noisy_point
+                self.transition_with_noise, Q, noise=ProcessNoise.AUGMENTED, point=self.noisy_point
             )
         return ProcessModel(
             self.transition,

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from records import bounded, validate_fields
 from robotsim.errors import RobotsimError
 
 #: Relative slack of the inside-the-cone and on-the-segment tests: a point on a cone edge
@@ -166,13 +167,13 @@ class SonarBeltParams:
 
     mount_xy: np.ndarray
     mount_angle_rad: np.ndarray
-    half_aperture_rad: float
-    d_max_m: float = 3.0
-    error_abs_bound_m: float = 0.02
-    error_rel_bound: float = 0.01
-    rate_hz: float = 1.0
-    outlier_prob: float = 0.0
-    lost_echo_prob: float = 0.0
+    half_aperture_rad: float = bounded(above=0.0, below=np.pi / 2)
+    d_max_m: float = bounded(3.0, above=0.0, maximum=100.0)
+    error_abs_bound_m: float = bounded(0.02, minimum=0.0, maximum=10.0)
+    error_rel_bound: float = bounded(0.01, minimum=0.0, below=1.0)
+    rate_hz: float = bounded(1.0, above=0.0, maximum=10_000.0)
+    outlier_prob: float = bounded(0.0, minimum=0.0, maximum=1.0)
+    lost_echo_prob: float = bounded(0.0, minimum=0.0, maximum=1.0)
 
     def __post_init__(self) -> None:
         mount_xy = _read_only(self.mount_xy, "mount_xy")
@@ -187,18 +188,7 @@ class SonarBeltParams:
             )
         object.__setattr__(self, "mount_xy", mount_xy)
         object.__setattr__(self, "mount_angle_rad", mount_angle)
-        checks = [
-            (0.0 < self.half_aperture_rad < np.pi / 2, "half_aperture_rad must be in (0, pi/2)"),
-            (0.0 < self.d_max_m < np.inf, "d_max_m must be positive and finite"),
-            (0.0 <= self.error_abs_bound_m < np.inf, "error_abs_bound_m must be >= 0"),
-            (0.0 <= self.error_rel_bound < 1.0, "error_rel_bound must be in [0, 1)"),
-            (0.0 < self.rate_hz < np.inf, "rate_hz must be positive"),
-            (0.0 <= self.outlier_prob <= 1.0, "outlier_prob must be in [0, 1]"),
-            (0.0 <= self.lost_echo_prob <= 1.0, "lost_echo_prob must be in [0, 1]"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise RobotsimError(f"sonar: {message}")
+        validate_fields(self, RobotsimError)
 
     @property
     def count(self) -> int:
