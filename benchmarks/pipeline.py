@@ -87,15 +87,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     spec = load_scenario(args.scenario).with_run(duration_s=args.duration)
     if args.tracker:
-        spec = dataclasses.replace(
-            spec, estimation=dataclasses.replace(spec.estimation, tracker=args.tracker)
-        )
+        spec = dataclasses.replace(spec, estimation=spec.estimation.with_keys(tracker=args.tracker))
 
     runs = [one_run(spec) for _ in range(max(1, args.repeat))]
     first, figures = runs[0]
     best = {name: min(run[0][name] for run in runs) for name in STAGES}
     print(
-        f"pipeline {args.scenario} ({spec.estimation.tracker}, {spec.estimation.filter}, "
+        f"pipeline {args.scenario} ({spec.estimation.intervals.tracker}, {spec.estimation.dead_reckoning.filter}, "
         f"{spec.estimation.fusion}): {args.duration:g} s; first run and best of {len(runs)}"
     )
     print("| stage | first (s) | best (s) | share |\n|---|---|---|---|")

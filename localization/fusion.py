@@ -37,7 +37,7 @@ in :attr:`FusionReport.skipped`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Literal
 
@@ -96,7 +96,7 @@ class FusionReport:
     moved: np.ndarray
     heading_moved: np.ndarray
     skipped: bool = False
-    hull: np.ndarray | None = None
+    hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
 
 
 def check_boxes(boxes, labels=None) -> tuple[np.ndarray, np.ndarray]:

@@ -786,7 +786,7 @@ class MotionModel:
         return out
 
     def process_model(
-        self, Q: Array, noise: ProcessNoise | str = ProcessNoise.ADDITIVE
+        self, Q: Array, noise: ProcessNoise = ProcessNoise.ADDITIVE
     ) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
 

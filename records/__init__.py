@@ -5,12 +5,12 @@ declared beside it, once::
 
     @dataclass(frozen=True)
     class RobotParams:
-        mass_kg: float = bounded(8.0, minimum=0.1, maximum=1000.0)
+        mass_kg: float = bounded(8.0, minimum=0.1, maximum=10_000.0)
 
         def __post_init__(self) -> None:
-            check_bounds(self, RobotsimError)
+            validate_fields(self, RobotsimError)
 
-and the same declaration serves both the record's own validation (:func:`check_bounds`,
+and the same declaration serves both the record's own validation (:func:`validate_fields`,
 so a record built in code is checked too) and the scenario reader
 (:func:`declared_bounds`), which refuses a bad value with the file and key before the
 record is built. This module imports nothing of the project: ``robotsim``, ``intervals``,
@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+from collections.abc import Callable
 from enum import Enum
 from typing import Any
 
@@ -101,7 +102,7 @@ def choices(choice_type: type[Enum]) -> tuple[str, ...]:
     return tuple(str(member.value) for member in choice_type)
 
 
-def validate_fields(record: Any, error: type[Exception]) -> None:
+def validate_fields(record: Any, error: Callable[[str], Exception]) -> None:
     """Check the fields of the frozen dataclass ``record`` (call it from ``__post_init__``):
 
     - a field with declared :class:`Bounds` must lie within them;

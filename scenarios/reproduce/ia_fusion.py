@@ -85,9 +85,7 @@ def main(args: argparse.Namespace) -> int:
     rows: dict[str, dict[str, Any]] = {}
     runs: dict[str, Estimation] = {}
     for tracker in TRACKERS:
-        variant = dataclasses.replace(
-            spec, estimation=dataclasses.replace(spec.estimation, tracker=tracker)
-        )
+        variant = dataclasses.replace(spec, estimation=spec.estimation.with_keys(tracker=tracker))
         estimation, _ = estimate(variant, log)
         runs[tracker] = estimation
         rows[tracker] = table_row(estimation_summary(log, estimation), estimation)
@@ -96,9 +94,7 @@ def main(args: argparse.Namespace) -> int:
         "scenario": spec.name,
         "seed": spec.run.seed,
         "duration_s": spec.run.duration_s,
-        "estimation": {
-            k: v for k, v in dataclasses.asdict(spec.estimation).items() if k != "tracker"
-        },
+        "estimation": {k: v for k, v in spec.estimation.as_keys().items() if k != "tracker"},
         "trackers": rows,
         "claims": claims,
     }
