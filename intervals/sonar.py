@@ -138,7 +138,6 @@ _ANGLE_MARGIN_RAD = 1e-9
 towards the larger, sound choice."""
 
 
-
 @dataclass(frozen=True, eq=False)
 class SonarBelt:
     """Geometry and error bounds of a sonar belt (same fields as ``robotsim``'s parameters).
@@ -568,7 +567,9 @@ def sensor_verdicts(
     if boxes.shape[1] != 3:
         raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
     if engine not in tuple(Engine):
-        raise IntervalError(f"sonar test: engine must be one of {', '.join(Engine)}, got {engine!r}")
+        raise IntervalError(
+            f"sonar test: engine must be one of {', '.join(Engine)}, got {engine!r}"
+        )
     if engine == Engine.NUMPY:
         return _numpy_sensor_verdicts(boxes, scan, inner)
     n, k = boxes.shape[0], scan.belt.count

@@ -785,9 +785,7 @@ class MotionModel:
         out[..., driven] += half
         return out
 
-    def process_model(
-        self, Q: Array, noise: ProcessNoise = ProcessNoise.ADDITIVE
-    ) -> ProcessModel:
+    def process_model(self, Q: Array, noise: ProcessNoise = ProcessNoise.ADDITIVE) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
 
         ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;
