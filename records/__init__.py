@@ -60,7 +60,8 @@ class Bounds:
         )
         for limit, sign, holds in checks:
             if limit is not None and not holds(limit):
-                return f"must be {sign} {limit:g}, got {shown}"
+                written = f"{int(limit)}" if self.integer else f"{limit:g}"
+                return f"must be {sign} {written}, got {shown}"
         return None
 
     def scaled(self, factor: float) -> Bounds:
