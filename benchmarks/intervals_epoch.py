@@ -33,7 +33,7 @@ import numpy as np
 
 from intervals.engine import Engine
 from intervals.sonar import SonarBelt, SonarScan, localize
-from intervals.tracker import IntervalTracker, TrackerSettings
+from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -93,7 +93,7 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
     poses = np.stack([4.5 + 2 * np.cos(omega * t), 3.8 + 2 * np.sin(omega * t), heading], 1)
     scans = [_scan(hall, params, belt, p, rng) for p in poses]
     rows = []
-    for kind in ("sivia", "imagesp"):
+    for kind in Tracker:
         trackers = {
             engine: IntervalTracker(
                 TrackerSettings(

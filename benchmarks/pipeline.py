@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from intervals.tracker import Tracker
+from records import choices
 from scenarios.metrics import summarize
 from scenarios.recording import write_recording
 from scenarios.runner import estimate, estimation_summary, simulate_spec
@@ -79,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         "--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)"
     )
     parser.add_argument(
-        "--tracker", choices=("sivia", "imagesp"), help="override the scenario's tracker"
+        "--tracker", choices=choices(Tracker), help="override the scenario's tracker"
     )
     parser.add_argument(
         "--repeat", type=int, default=1, help="repeats, best kept per stage (default: %(default)s)"

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from intervals.tracker import Tracker
 from scenarios.outputs import atomic_directory, write_json, write_text
 from scenarios.runner import (
     FUSED,
@@ -49,7 +50,7 @@ from scenarios.spec import load_scenario
 
 HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP trackers on hall (table, figures 7-9)"
 
-TRACKERS = ("sivia", "imagesp")
+TRACKERS = tuple(Tracker)
 SCENARIO = "hall"
 
 #: Boxes are drawn at every this many epochs in the figures (all of them would hide the paths).
