@@ -98,6 +98,8 @@ class PurePursuit:
     def _point(self, index: int) -> tuple[float, float]:
         """Path point ``index``: 0 is the start, then the waypoints (cycling if looping)."""
         if index == 0:
+            if self._start is None:  # set by the first command
+                raise RobotsimError("pure pursuit: the path has no start before the first command")
             return self._start
         count = len(self._waypoints)
         return self._waypoints[

@@ -8,8 +8,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     One line shown by ``robotsim scenarios``.
 ``[run]``
     ``duration_s`` (60.0), ``seed`` (0), and the sample rate of the simulation and of the
-    proprioceptive sensors: ``rate_hz`` (100.0) or ``dt_s`` (0.01), not both. A run has
-    from 1 to :data:`MAX_SAMPLES` samples (``duration_s * rate_hz``).
+    proprioceptive sensors: ``rate_hz`` (100.0, from :data:`MIN_RATE_HZ` to
+    :data:`MAX_RATE_HZ`) or ``dt_s`` (0.01), not both. A run has from 1 to
+    :data:`MAX_SAMPLES` samples (``duration_s * rate_hz``).
 ``[map]``
     Exactly one of ``builtin`` (a name of ``robotsim.maps.BUILTIN_MAP_NAMES``),
     ``segments`` (an array of ``[[ax, ay], [bx, by]]`` in metres) or ``file`` (a ``.wkt``,
@@ -31,15 +32,22 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
     sample; a faster or off-beat sonar is refused rather than silently slowed).
 ``[estimation]``
-    The localisation pipeline (paper 002): ``filter`` (``"ukf"``; or ``"iukf"``, ``"ekf"``,
-    ``"iekf"``), ``tracker`` (``"sivia"`` or ``"imagesp"``), ``fusion`` (``"clamp"``, the
-    paper's rule, or another rule of ``localization.fusion``), ``eps_m`` (0.05),
-    ``q_max`` (1), ``guaranteed`` (true), ``interval_rate_hz`` (the sonar's rate: an epoch at every scan),
-    ``heading_scale_m_per_rad`` (1.0), ``imagesp_pitch_m`` (0.2), ``free_space``
-    (default: true exactly when the sonar never loses an echo) and ``ray_test`` (default: true
-    exactly when the sonar's half-aperture is at most 0.1 rad). See :class:`EstimationSpec`.
+    The localisation pipeline (paper 002), read into the records of the packages that use
+    it: ``filter`` (``localization.dead_reckoning.DeadReckoningSettings``: ``"ukf"``; or
+    ``"iukf"``, ``"ekf"``, ``"iekf"``); ``tracker`` (``"sivia"`` or ``"imagesp"``), ``eps_m``
+    (0.05), ``q_max`` (1), ``guaranteed`` (true), ``heading_scale_m_per_rad`` (1.0),
+    ``imagesp_pitch_m`` (0.2) and ``ray_test`` (default: true exactly when the sonar's
+    half-aperture is at most 0.1 rad) (``intervals.tracker.TrackerSettings``, with the
+    robot's limits); ``fusion`` (``"clamp"``, the paper's rule, or another
+    ``localization.fusion.FusionRule``), ``interval_rate_hz`` (the sonar's rate: an epoch at
+    every scan) and ``free_space`` (default: true exactly when the sonar never loses an
+    echo). See :class:`EstimationSpec`.
 
-Every mistake raises ``ScenarioError(file, "table.key", reason)``.
+Every number is checked against the bounds declared beside its field in the record that
+holds it (``records.bounded``: physical limits that keep every integer and float the
+simulator and the filters compute in range), every choice against its ``StrEnum``; the
+records check themselves the same way when built in code. Every mistake raises
+``ScenarioError(file, "table.key", reason)``.
 """
 
 from __future__ import annotations
@@ -70,7 +78,7 @@ from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
 from robotsim.robot import RobotParams, wrap_angle
 from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
-from robotsim.sensors.sonar import SonarBeltParams
+from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
 from robotsim.world import World
 from scenarios.errors import ScenarioError
 from scenarios.tables import Table
@@ -534,7 +542,9 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
         raise table.error(
             "count", "give count (an even belt) or mount_xy and mount_angle_rad, not both"
         )
-    count = table.take_int("count", None, minimum=1)
+    count = table.take_int(
+        "count", None, bounds=Bounds(minimum=1, maximum=MAX_BELT_COUNT, integer=True)
+    )
     belt = {} if count is None else {"count": count}
     try:
         default = SonarBeltParams.default_belt(robot_radius_m=robot.radius_m, **belt)

@@ -148,6 +148,11 @@ def _read_only(values: Any, shape_name: str) -> np.ndarray:
     return array
 
 
+#: The most sensors of a default belt: real belts have 8 to 32; every interval epoch tests
+#: each box against each sensor, so the count multiplies its memory and time.
+MAX_BELT_COUNT = 64
+
+
 @dataclass(frozen=True, eq=False)
 class SonarBeltParams:
     """A belt of k sonars firing together at ``rate_hz``.
@@ -206,9 +211,10 @@ class SonarBeltParams:
         """``count`` sensors evenly around the rim of a disk robot, the first one facing
         forward, each pointing radially outwards. ``settings`` are the other fields
         (``d_max_m``, error bounds, rate, fault probabilities)."""
-        if count < 1 or not robot_radius_m > 0:
+        if not (1 <= count <= MAX_BELT_COUNT) or not robot_radius_m > 0:
             raise RobotsimError(
-                f"sonar belt needs count >= 1 and robot_radius_m > 0, got {count}, {robot_radius_m}"
+                f"sonar belt needs 1 <= count <= {MAX_BELT_COUNT} and robot_radius_m > 0, "
+                f"got {count}, {robot_radius_m}"
             )
         angle = 2.0 * np.pi * np.arange(count) / count
         angle = np.where(angle >= np.pi, angle - 2.0 * np.pi, angle)  # wrap to [-pi, pi)

@@ -58,6 +58,7 @@ DEFECTS = {
         str(2**62),
         f"must be <= 16777216, got {2**62}",
     ),
+    "a belt of 2^62 sonars": ("sensors.sonar", "count", str(2**62), f"must be <= 64, got {2**62}"),
     "huge accelerometer bias": (
         "sensors.accelerometer",
         "turn_on_bias_std_m_s2",
