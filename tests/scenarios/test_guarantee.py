@@ -240,9 +240,10 @@ def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
     assert "containment 0.96" in failure and spec.source in failure
     assert guarantee_failure(spec, {"containment": 1.0}) is None
     assert guarantee_failure(spec, {"containment": None}) is None  # no set at all: nothing to judge
+    without_free_space = spec.with_estimation(free_space=False)  # unsound with lost echoes
     for fault in ("outlier_prob", "lost_echo_prob"):
         faulty = dataclasses.replace(
-            spec,
+            without_free_space,
             sensors=dataclasses.replace(
                 spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})
             ),
