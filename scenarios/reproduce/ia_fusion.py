@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from intervals.tracker import Tracker
+from scenarios.commands import with_run_options
 from scenarios.outputs import atomic_directory, write_json, write_text
 from scenarios.runner import (
     FUSED,
@@ -81,7 +82,7 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    spec = load_scenario(SCENARIO).with_run(seed=args.seed, duration_s=args.duration)
+    spec = with_run_options(load_scenario(SCENARIO), args.seed, args.duration)
     log = simulate_spec(spec)
     rows: dict[str, dict[str, Any]] = {}
     runs: dict[str, Estimation] = {}
