@@ -48,7 +48,10 @@ class Bounds:
                 return f"must be an integer, got {value!r}"
         elif isinstance(value, bool) or not isinstance(value, numbers.Real):
             return f"must be a number, got {value!r}"
-        number = int(value) if self.integer else float(value)  # type: ignore[call-overload]
+        try:
+            number = int(value) if self.integer else float(value)  # type: ignore[call-overload]
+        except OverflowError:  # an integer beyond every float
+            return f"must be finite, got {value}"
         if not math.isfinite(number):
             return f"must be finite, got {number}"
         shown = f"{number}" if self.integer else f"{number:g}"
