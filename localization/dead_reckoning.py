@@ -120,7 +120,7 @@ from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
 from localization.ukf import UnscentedKalmanFilter
-from records import validate_fields
+from records import bounded, validate_fields
 
 STATE_NAMES = (
     "x_m",
@@ -159,21 +159,12 @@ class NominalRobot:
         ticks_per_rev: encoder ticks per wheel revolution.
     """
 
-    wheel_radius_m: float
-    wheel_base_m: float
-    ticks_per_rev: int
+    wheel_radius_m: float = bounded(above=0.0)
+    wheel_base_m: float = bounded(above=0.0)
+    ticks_per_rev: int = bounded(minimum=1, integer=True)
 
     def __post_init__(self) -> None:
-        _positive(
-            "NominalRobot",
-            wheel_radius_m=self.wheel_radius_m,
-            wheel_base_m=self.wheel_base_m,
-            ticks_per_rev=self.ticks_per_rev,
-        )
-        if int(self.ticks_per_rev) != self.ticks_per_rev:
-            raise EstimationError(
-                f"NominalRobot: ticks_per_rev must be an integer, got {self.ticks_per_rev!r}"
-            )
+        validate_fields(self, EstimationError)
 
     @property
     def metres_per_tick(self) -> float:
@@ -202,23 +193,20 @@ class DeadReckoningNoise:
             (small; keeps the pose covariance positive definite).
     """
 
-    tick_std: float = 1.0 / math.sqrt(6.0)
-    gyro_noise_density_rad_s_sqrt_hz: float = math.radians(0.005)
-    gyro_bias_std_rad_s: float = math.radians(0.1)
-    gyro_bias_random_walk_rad_s_sqrt_s: float = math.radians(0.002)
-    accel_noise_density_m_s2_sqrt_hz: float = 400e-6 * _G_M_S2
-    accel_bias_std_m_s2: float = 20e-3 * _G_M_S2
-    accel_bias_random_walk_m_s2_sqrt_s: float = 0.05e-3 * _G_M_S2
-    wheel_radius_rel_std: float = 0.01
-    yaw_accel_std_rad_s2: float = 2.0 * 0.5 / 0.30
-    position_std_m_sqrt_s: float = 1e-4
-    heading_std_rad_sqrt_s: float = 1e-4
+    tick_std: float = bounded(1.0 / math.sqrt(6.0), above=0.0)
+    gyro_noise_density_rad_s_sqrt_hz: float = bounded(math.radians(0.005), above=0.0)
+    gyro_bias_std_rad_s: float = bounded(math.radians(0.1), above=0.0)
+    gyro_bias_random_walk_rad_s_sqrt_s: float = bounded(math.radians(0.002), above=0.0)
+    accel_noise_density_m_s2_sqrt_hz: float = bounded(400e-6 * _G_M_S2, above=0.0)
+    accel_bias_std_m_s2: float = bounded(20e-3 * _G_M_S2, above=0.0)
+    accel_bias_random_walk_m_s2_sqrt_s: float = bounded(0.05e-3 * _G_M_S2, above=0.0)
+    wheel_radius_rel_std: float = bounded(0.01, above=0.0)
+    yaw_accel_std_rad_s2: float = bounded(2.0 * 0.5 / 0.30, above=0.0)
+    position_std_m_sqrt_s: float = bounded(1e-4, above=0.0)
+    heading_std_rad_sqrt_s: float = bounded(1e-4, above=0.0)
 
     def __post_init__(self) -> None:
-        _positive(
-            "DeadReckoningNoise",
-            **{name: getattr(self, name) for name in self.__dataclass_fields__},
-        )
+        validate_fields(self, EstimationError)
 
     def process_cov(self, dt_s: float) -> np.ndarray:
         """``Q (8, 8)``, diagonal, of one step of ``dt_s`` seconds."""
