@@ -31,6 +31,7 @@ from _common import best_seconds
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningSettings,
+    Filter,
     NominalRobot,
     initial_belief,
     odometry_data,
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     epochs = range(100, data.count, 100)
     DeadReckoning(data, initial).run(1)  # load (or compile) the kernels before any timing
     rows = []
-    for name in ("ukf", "iukf", "ekf"):
+    for name in (Filter.UKF, Filter.IUKF, Filter.EKF):
         settings = DeadReckoningSettings(filter=name)
         plain = best_seconds(partial(run_dead_reckoning, data, initial, settings), args.repeats)
         fused = best_seconds(

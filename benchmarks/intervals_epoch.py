@@ -12,7 +12,7 @@ scenario's run (``--pipeline-s`` simulated seconds, 0 to skip) with its ``[estim
 settings (SIVIA, ``q_max`` 1, guaranteed, the robot's physical limits), as ``robotsim run``
 steps it (only the interval epochs are timed).
 
-Every case runs both engines of the sonar box test (:data:`intervals.sonar.ENGINES`: the
+Every case runs both engines of the sonar box test (:class:`intervals.engine.Engine`: the
 numpy reference and the compiled kernel) on the same scans, interleaved scan by scan, and
 reports their times side by side with the median per-epoch speed-up; it exits 1 as well if
 their sets differ. The compiled kernel is loaded (compiled, on a fresh checkout) by one
@@ -32,8 +32,9 @@ from functools import partial
 
 import numpy as np
 
-from intervals.sonar import ENGINES, SonarBelt, SonarScan, localize
-from intervals.tracker import IntervalTracker, TrackerSettings
+from intervals.engine import Engine
+from intervals.sonar import SonarBelt, SonarScan, localize
+from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -69,7 +70,7 @@ def _step_both(trackers, previous, scan, dt_s, repeat):
     """One tracker epoch per engine on the same scan, interleaved: ``(results, best_s)`` dicts
     keyed by engine (the best of ``repeat`` identical runs each)."""
     results, best = {}, {}
-    for engine in ENGINES:
+    for engine in Engine:
         results[engine], best[engine] = _best_of(
             lambda e=engine: trackers[e].step(previous[e], scan, dt_s), repeat
         )
@@ -78,7 +79,7 @@ def _step_both(trackers, previous, scan, dt_s, repeat):
 
 def _same_sets(results) -> bool:
     """Every engine returned the same status and the same boxes."""
-    first = results[ENGINES[0]]
+    first = results[Engine.COMPILED]
     return all(
         r.status == first.status and np.array_equal(r.outer, first.outer) for r in results.values()
     )
@@ -93,7 +94,7 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
     poses = np.stack([4.5 + 2 * np.cos(omega * t), 3.8 + 2 * np.sin(omega * t), heading], 1)
     scans = [_scan(hall, params, belt, p, rng) for p in poses]
     rows = []
-    for kind in ("sivia", "imagesp"):
+    for kind in Tracker:
         trackers = {
             engine: IntervalTracker(
                 TrackerSettings(
@@ -101,15 +102,15 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
                 ),
                 hall.bounds,
             )
-            for engine in ENGINES
+            for engine in Engine
         }
-        previous = dict.fromkeys(ENGINES)
-        times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
+        previous = dict.fromkeys(Engine)
+        times, boxes, areas, kept, differ = {e: [] for e in Engine}, [], [], 0, 0
         for truth, scan in zip(poses, scans, strict=True):
             results, best = _step_both(trackers, previous, scan, 1.0, repeat)
             result = results["compiled"]
             if result.status == "tracking":
-                for engine in ENGINES:
+                for engine in Engine:
                     times[engine].append(best[engine])
                 boxes.append(result.paving.outer.shape[0])
                 areas.append(result.paving.area_xy())
@@ -128,21 +129,21 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
 
 def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
     """The tracker on the scans of the ``hall`` scenario, with the scenario's settings."""
-    from scenarios.runner import simulate_spec, tracker_settings
+    from scenarios.runner import simulate_spec
     from scenarios.spec import load_scenario
 
     spec = load_scenario("hall").with_run(duration_s=duration_s)
     log = simulate_spec(spec)
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    settings = tracker_settings(spec)
+    settings = spec.estimation.intervals
     trackers = {
         engine: IntervalTracker(dataclasses.replace(settings, engine=engine), spec.map.bounds)
-        for engine in ENGINES
+        for engine in Engine
     }
     scans = np.arange(0, len(log.sonar_t_s), est.scan_stride(spec.sensors.sonar.rate_hz))
-    previous, last_t = dict.fromkeys(ENGINES), log.sonar_t_s[scans[0]]
-    times, boxes, areas, kept, differ = {e: [] for e in ENGINES}, [], [], 0, 0
+    previous, last_t = dict.fromkeys(Engine), log.sonar_t_s[scans[0]]
+    times, boxes, areas, kept, differ = {e: [] for e in Engine}, [], [], 0, 0
     for index in scans:
         scan = SonarScan(spec.map.segments, belt, log.sonar_range_m[index], spec.map.boundary)
         results, best = _step_both(
@@ -150,7 +151,7 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
         )
         result = results["compiled"]
         previous, last_t = {e: r.paving for e, r in results.items()}, log.sonar_t_s[index]
-        for engine in ENGINES:
+        for engine in Engine:
             times[engine].append(best[engine])
         differ += int(not _same_sets(results))
         if result.consistent:
@@ -214,14 +215,14 @@ def main(argv: list[str] | None = None) -> int:
     whole = np.array([b[0], b[1], [-np.pi, np.pi]])
 
     warm_up = _scan(hall, params, belt, np.array([3.0, 3.0, 0.0]), np.random.default_rng(0))
-    for engine in ENGINES:  # load (or compile) the kernel before timing; rng left untouched
+    for engine in Engine:  # load (or compile) the kernel before timing; rng left untouched
         localize(warm_up, whole, 0.5, engine=engine)
     rows, lost = [], 0
     for label, runs in (
         ("tracking epoch (prior +-0.5 m, +-0.2 rad)", args.epochs),
         ("global localisation (whole hall)", args.global_runs),
     ):
-        times, boxes, areas, differ = {e: [] for e in ENGINES}, [], [], 0
+        times, boxes, areas, differ = {e: [] for e in Engine}, [], [], 0
         for truth in _random_poses(hall, runs, rng):
             scan = _scan(hall, params, belt, truth, rng)
             if label.startswith("tracking"):
@@ -230,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 prior = whole
             pavings = {}
-            for engine in ENGINES:  # interleaved: both engines on each scan in turn
+            for engine in Engine:  # interleaved: both engines on each scan in turn
                 pavings[engine], best = _best_of(
                     partial(localize, scan, prior, eps, engine=engine), args.repeat
                 )

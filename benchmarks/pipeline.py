@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from intervals.tracker import Tracker
 from scenarios.metrics import summarize
 from scenarios.recording import write_recording
 from scenarios.runner import estimate, estimation_summary, simulate_spec
 from scenarios.spec import load_scenario
+from validated_records import choices
 
 STAGES = (
     "physics",
@@ -79,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         "--duration", type=float, default=600.0, help="simulated seconds (default: %(default)s)"
     )
     parser.add_argument(
-        "--tracker", choices=("sivia", "imagesp"), help="override the scenario's tracker"
+        "--tracker", choices=choices(Tracker), help="override the scenario's tracker"
     )
     parser.add_argument(
         "--repeat", type=int, default=1, help="repeats, best kept per stage (default: %(default)s)"
@@ -87,15 +89,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     spec = load_scenario(args.scenario).with_run(duration_s=args.duration)
     if args.tracker:
-        spec = dataclasses.replace(
-            spec, estimation=dataclasses.replace(spec.estimation, tracker=args.tracker)
-        )
+        spec = dataclasses.replace(spec, estimation=spec.estimation.with_keys(tracker=args.tracker))
 
     runs = [one_run(spec) for _ in range(max(1, args.repeat))]
     first, figures = runs[0]
     best = {name: min(run[0][name] for run in runs) for name in STAGES}
     print(
-        f"pipeline {args.scenario} ({spec.estimation.tracker}, {spec.estimation.filter}, "
+        f"pipeline {args.scenario} ({spec.estimation.intervals.tracker}, {spec.estimation.dead_reckoning.filter}, "
         f"{spec.estimation.fusion}): {args.duration:g} s; first run and best of {len(runs)}"
     )
     print("| stage | first (s) | best (s) | share |\n|---|---|---|---|")

@@ -85,7 +85,7 @@ A box is rejected by sensor ``i`` (:func:`ray_rejections`) when every piece is; 
 (:func:`joint_rejections`) when in every piece more than ``q`` sensors reject the piece (a
 pose of the box lies in some piece, where more than ``q`` readings cannot be explained).
 
-Engines (:data:`ENGINES`): the numpy reference evaluates all of the above on arrays of
+Engines (:class:`intervals.engine.Engine`): the numpy reference evaluates all of the above on arrays of
 (piece, sensor, segment) triples; the compiled kernel (numba) performs the same operations in
 the same order, triple by triple, and stops early: a sensor's piece is decided once one
 segment passes the hit test and one surely meets a free-space ray, and it skips the
@@ -121,6 +121,7 @@ import numpy as np
 from intervals import interval as ia
 from intervals import sonar  # the module, not names: intervals.sonar may import this module
 from intervals.boxes import as_boxes
+from intervals.engine import Engine
 from intervals.errors import IntervalError
 
 DEFAULT_PIECES = (1, 1, 4)
@@ -145,9 +146,6 @@ module doc: at least 9 ulps there; it also covers the rounding of ``+- TRIG_TOL`
 MAX_B_WIDTH_RAD = 3.0
 """Widest ``B`` interval on which ``sin B`` is claimed to keep one sign (below pi)."""
 
-ENGINES = ("compiled", "numpy")
-"""Implementations of :func:`piece_rejections`: the numba kernel (default) and the numpy
-reference it is tested against (same operations in the same order)."""
 
 BLOCK_ELEMENTS = 1 << 18
 """Largest number of (piece, sensor, segment) triples evaluated in one numpy pass."""
@@ -714,21 +712,21 @@ def piece_rejections(
     (:class:`intervals.sonar.SonarScan`; the scan :meth:`~intervals.sonar.SonarScan.restricted_to`
     the boxes gives the same soundness, faster: it keeps every segment within reach, all the hit
     test needs, and the free-space test is sound with any subset); ``pieces``: ``(px, py, pt)``;
-    ``engine``: one of :data:`ENGINES`. Sound for the cone model of :mod:`intervals.sonar` at
+    ``engine``: an :class:`~intervals.engine.Engine`. Sound for the cone model of :mod:`intervals.sonar` at
     every half-aperture, tight for a ray (see the module doc). The numpy engine is vectorised
     over pieces, sensors and segments in blocks of about :data:`BLOCK_ELEMENTS` triples; the
     compiled one loops over them in one call.
     """
     boxes, pieces = _checked(boxes, scan, pieces)
-    if engine not in ENGINES:
-        raise IntervalError(f"ray test: engine must be one of {ENGINES}, got {engine!r}")
+    if engine not in tuple(Engine):
+        raise IntervalError(f"ray test: engine must be one of {', '.join(Engine)}, got {engine!r}")
     n, p, k, m = boxes.shape[0], int(np.prod(pieces)), scan.belt.count, scan.segments.shape[0]
     echo = scan.kind == sonar.ECHO
     reject = np.broadcast_to(echo & (scan.ranges[:, 0] > scan.ranges[:, 1]), (n * p, k)).copy()
     if m == 0 or n == 0:
         return (reject | echo).reshape(n, p, k)  # an echo needs a segment to come from
     parts = sub_boxes(boxes, pieces).reshape(n * p, 3, 2)
-    run = _compiled_pieces if engine == "compiled" else _numpy_pieces
+    run = _compiled_pieces if engine == Engine.COMPILED else _numpy_pieces
     run(parts, scan, _ray_constants(scan), reject)
     return reject.reshape(n, p, k)
 

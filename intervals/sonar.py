@@ -71,7 +71,7 @@ a feasible box into a rejected one. A half-plane clip shifted by ``GUARD_M`` mov
 by ``GUARD_M`` in space, whatever the angle between the segment and the boundary, and its
 rounding error scales with the same angle.
 
-Two implementations (:data:`ENGINES`). The box tests (sensor tests and in-room test) run by
+Two implementations (:class:`intervals.engine.Engine`). The box tests (sensor tests and in-room test) run by
 default in the compiled kernels of :mod:`intervals.sonar_kernel` (numba; one call per SIVIA
 level, scalar loops over boxes, segments and sensors). The vectorised numpy code in this module
 is their reference. The kernels evaluate the same formulas in the same order of float64
@@ -101,6 +101,7 @@ from intervals.boxes import (
     max_width,
     pose_scale,
 )
+from intervals.engine import Engine
 from intervals.errors import IntervalError
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 from intervals.sonar_kernel import ECHO, FREE, IGNORED  # kinds of sensor constraint
@@ -135,10 +136,6 @@ _ARC_SLACK = 1e-12
 _ANGLE_MARGIN_RAD = 1e-9
 """Margin of the heading-width decisions (``Psi`` not empty, ``width(Phi) < pi``, a full turn),
 towards the larger, sound choice."""
-
-ENGINES = ("compiled", "numpy")
-"""Implementations of :func:`sensor_verdicts`: the compiled kernel
-(:mod:`intervals.sonar_kernel`, the default) and the numpy reference it is tested against."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -525,7 +522,7 @@ def _room_verdict(
     boundary polygon: no edge comes within ``GUARD_M`` of it (sound lower bound of the
     distance) and the ray cast from its centre says outside / inside. ``engine`` as in
     :func:`sensor_verdicts` (the numpy code below is the reference)."""
-    if engine == "compiled":
+    if engine == Engine.COMPILED:
         n = boxes.shape[0]
         outside, inside = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         sonar_kernel.room_verdicts_into(
@@ -563,16 +560,18 @@ def sensor_verdicts(
     or free-space test fires). ``certain``: the reading is consistent with every pose of the box
     (only computed when ``inner``; else all False). Ignored sensors never reject and are always
     certain (when ``inner``). See the module doc for the tests and their soundness.
-    ``engine``: one of :data:`ENGINES`; ``"compiled"`` runs :mod:`intervals.sonar_kernel` (one
+    ``engine``: an :class:`~intervals.engine.Engine`; ``"compiled"`` runs :mod:`intervals.sonar_kernel` (one
     call for all boxes), ``"numpy"`` the vectorised reference below (same results).
     """
     boxes = as_boxes(boxes)
     if boxes.shape[1] != 3:
         raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
-    if engine == "numpy":
+    if engine not in tuple(Engine):
+        raise IntervalError(
+            f"sonar test: engine must be one of {', '.join(Engine)}, got {engine!r}"
+        )
+    if engine == Engine.NUMPY:
         return _numpy_sensor_verdicts(boxes, scan, inner)
-    if engine != "compiled":
-        raise IntervalError(f"sonar test: engine must be one of {ENGINES}, got {engine!r}")
     n, k = boxes.shape[0], scan.belt.count
     reject, certain = np.empty((n, k), dtype=bool), np.empty((n, k), dtype=bool)
     belt, boxes = scan.belt, np.ascontiguousarray(boxes)  # one compiled signature: C order

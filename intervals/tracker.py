@@ -12,7 +12,7 @@ Two predictions are offered (MODELS.md section 4):
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
 
 Outliers: q-relaxation and GOMNE (:func:`intervals.sonar.gomne`), up to ``q_max``. Each epoch
-ends in one of :data:`STATUSES`:
+ends in one of the :class:`EpochStatus`:
 
 * ``"global"``: a global search gave the set (the first epoch, and the one after an epoch
   without a set);
@@ -29,6 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
@@ -41,74 +42,82 @@ from intervals.boxes import (
     unwrap_headings,
     wrap_headings,
 )
+from intervals.engine import Engine
 from intervals.errors import IntervalError
 from intervals.imagesp import imagesp
-from intervals.sonar import ENGINES, SonarScan, gomne
+from intervals.sonar import SonarScan, gomne
+from validated_records import bounded, validate_fields
 
-TRACKERS = ("sivia", "imagesp")
-STATUSES = ("global", "tracking", "inconsistent", "lost")
+#: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
+#: (a millimetre is far below the sonar's error bounds).
+MIN_EPS_M = 1e-3
+
+
+class Tracker(StrEnum):
+    """The tracker's prediction of the previous set (module docstring)."""
+
+    SIVIA = "sivia"
+    """The hull of the previous outer boxes, inflated by the limits, inverted as one box."""
+    IMAGESP = "imagesp"
+    """Every previous box mapped, merged on a grid (IMAGESP), then contracted."""
+
+
+class EpochStatus(StrEnum):
+    """How an epoch ended (module docstring)."""
+
+    GLOBAL = "global"
+    TRACKING = "tracking"
+    INCONSISTENT = "inconsistent"
+    LOST = "lost"
 
 
 @dataclass(frozen=True)
 class TrackerSettings:
-    """Settings of the interval tracker (validated at construction).
+    """Settings of the interval tracker (validated at construction, bounds beside each field).
 
-    ``eps_m``: SIVIA precision (scaled widths, m); ``heading_scale_m_per_rad``: metres per
-    radian when comparing widths; ``q_max``: largest number of outliers GOMNE may assume;
-    ``v_max_m_s``, ``omega_max_rad_s``: the robot's physical limits; ``tracker``: ``"sivia"``
-    or ``"imagesp"``; ``imagesp_pitch_m``: grid pitch of the IMAGESP prediction (scaled like
-    ``eps_m``; coarser than ``eps_m`` keeps the number of cells small before SIVIA refines);
-    ``guaranteed``: keep the ``q_max``-relaxed set, which holds the truth whenever a scan has
-    at most ``q_max`` outliers (True), or GOMNE's smaller set at its minimal ``q``, which can
-    miss it (False; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger
-    where few sensors see a wall, and a kidnapping is then detected later. ``engine``: the
-    implementation of the sonar box test, one of :data:`intervals.sonar.ENGINES` (the compiled
-    kernel by default; ``"numpy"`` is its reference, same sets). ``ray_test``: add the ray test
-    of :mod:`intervals.rays` to the box test (``None``: only for thin cones, see
-    :data:`intervals.sonar.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
+    The scenario file's ``[estimation]`` table sets ``eps_m`` .. ``ray_test``; the robot's
+    limits come from its ``[robot]`` table.
     """
 
-    v_max_m_s: float
-    omega_max_rad_s: float
-    eps_m: float = 0.05
-    heading_scale_m_per_rad: float = 1.0
-    q_max: int = 2
-    tracker: str = "sivia"
-    imagesp_pitch_m: float = 0.2
+    v_max_m_s: float = bounded(minimum=0.0)
+    """The robot's largest forward speed, m/s (the prediction's reach per second)."""
+    omega_max_rad_s: float = bounded(minimum=0.0)
+    """The robot's largest yaw rate, rad/s."""
+    eps_m: float = bounded(0.05, minimum=MIN_EPS_M)
+    """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m."""
+    heading_scale_m_per_rad: float = bounded(1.0, above=0.0)
+    """Metres per radian when the heading width is compared with position widths."""
+    q_max: int = bounded(1, minimum=0, integer=True)
+    """Largest number of outlying sonar readings GOMNE may assume per epoch (the scenario
+    also requires fewer than the belt's sensors)."""
+    tracker: Tracker = Tracker.SIVIA
+    """The prediction: :class:`Tracker` (a string of its values is accepted)."""
+    imagesp_pitch_m: float = bounded(0.2, above=0.0)
+    """Grid pitch of the IMAGESP prediction (scaled like ``eps_m``; at least ``eps_m``: coarser
+    keeps the number of cells small before SIVIA refines)."""
     guaranteed: bool = True
-    engine: str = "compiled"
+    """Keep the ``q_max``-relaxed set, which holds the truth whenever a scan has at most
+    ``q_max`` outliers (true), or GOMNE's smaller set at its minimal ``q``, which can miss it
+    (false; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger where few
+    sensors see a wall, and a kidnapping is then detected later."""
+    engine: Engine = Engine.COMPILED
+    """The implementation of the sonar box test (the compiled kernel by default; ``numpy`` is
+    its reference, same sets)."""
     ray_test: bool | None = None
+    """Add the ray test of :mod:`intervals.rays` to the box test (``None``: only for thin cones,
+    see :data:`intervals.sonar.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
 
     def __post_init__(self) -> None:
-        checks = (
-            (np.isfinite(self.v_max_m_s) and self.v_max_m_s >= 0, "v_max_m_s must be >= 0"),
-            (
-                np.isfinite(self.omega_max_rad_s) and self.omega_max_rad_s >= 0,
-                "omega_max_rad_s must be >= 0",
-            ),
-            (np.isfinite(self.eps_m) and self.eps_m > 0, "eps_m must be > 0"),
-            (
-                np.isfinite(self.heading_scale_m_per_rad) and self.heading_scale_m_per_rad > 0,
-                "heading_scale_m_per_rad must be > 0",
-            ),
-            (
-                isinstance(self.q_max, (int, np.integer)) and self.q_max >= 0,
-                "q_max must be an integer >= 0",
-            ),
-            (self.tracker in TRACKERS, f"tracker must be one of {TRACKERS}"),
-            (
-                np.isfinite(self.imagesp_pitch_m) and self.imagesp_pitch_m >= self.eps_m,
-                "imagesp_pitch_m must be >= eps_m",
-            ),
-            (self.engine in ENGINES, f"engine must be one of {ENGINES}"),
-            (
-                self.ray_test is None or isinstance(self.ray_test, bool),
-                "ray_test must be True, False or None",
-            ),
-        )
-        for ok, message in checks:
-            if not ok:
-                raise IntervalError(f"tracker settings: {message}, got {self}")
+        validate_fields(self, IntervalError)
+        if not isinstance(self.ray_test, bool | None):
+            raise IntervalError(
+                f"TrackerSettings.ray_test must be True, False or None, got {self.ray_test!r}"
+            )
+        if self.imagesp_pitch_m < self.eps_m:
+            raise IntervalError(
+                f"TrackerSettings.imagesp_pitch_m must be >= eps_m ({self.eps_m:g}), "
+                f"got {self.imagesp_pitch_m:g}"
+            )
 
 
 @dataclass(frozen=True)
@@ -118,13 +127,13 @@ class EpochResult:
     ``paving``: the pose set, None when the epoch is ``"inconsistent"`` or ``"lost"`` (headings
     wrapped to ``[-pi, pi]``); ``q``: GOMNE's minimal number of outliers explaining the scan
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
-    ``guaranteed``); ``status``: one of :data:`STATUSES`; ``elapsed_s``: wall time of the
+    ``guaranteed``); ``status``: an :class:`EpochStatus`; ``elapsed_s``: wall time of the
     epoch (timing, not a result).
     """
 
     paving: Subpaving | None
     q: int | None
-    status: str
+    status: EpochStatus
     elapsed_s: float = 0.0
 
     @property
@@ -197,7 +206,7 @@ class IntervalTracker:
         boxes = previous.outer
         boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
         s = self.settings
-        if s.tracker == "sivia":
+        if s.tracker == Tracker.SIVIA:
             return wrap_headings(self.limits(hull(boxes)[None], dt_s))
         motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
@@ -225,10 +234,10 @@ class IntervalTracker:
         start = time.perf_counter()
         if previous is None or previous.is_empty:
             found = self._search(scan, global_box(self.map_bounds))
-            status = "global" if found.consistent else "lost"
+            status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
             found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
-            status = "tracking" if found.consistent else "inconsistent"
+            status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
         paving = Subpaving(wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary))

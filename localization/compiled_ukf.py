@@ -72,6 +72,7 @@ from localization.compiled_linalg import (
     wrap_residual,
 )
 from localization.errors import EstimationError
+from localization.models import ProcessNoise
 
 OK = 0
 NOT_POSITIVE_DEFINITE = 1
@@ -601,7 +602,7 @@ def predict(
     arguments that are not numbers, a noise matrix of another batch) or failed (status).
     """
     runs = runs_of(mean)
-    augmented = model.noise == "augmented"
+    augmented = model.noise == ProcessNoise.AUGMENTED
     noise = per_run(model.noise_sqrt if augmented else model.Q, runs)
     packed = pack_args(args, mean.shape[:-1])
     if runs == 0 or noise is None or packed is None:

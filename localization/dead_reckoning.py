@@ -96,7 +96,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from enum import StrEnum
 
 import numpy as np
 
@@ -120,6 +120,7 @@ from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
 from localization.ukf import UnscentedKalmanFilter
+from validated_records import bounded, validate_fields
 
 STATE_NAMES = (
     "x_m",
@@ -132,7 +133,6 @@ STATE_NAMES = (
     "d_wheel",
 )
 ANGLE_INDICES = (THETA,)
-FILTERS = ("ukf", "iukf", "ekf", "iekf")
 _G_M_S2 = 9.80665
 _WRAP_GAMMA = 0.01  # sigma-point spread from which the compiled step wraps heading offsets
 
@@ -159,21 +159,12 @@ class NominalRobot:
         ticks_per_rev: encoder ticks per wheel revolution.
     """
 
-    wheel_radius_m: float
-    wheel_base_m: float
-    ticks_per_rev: int
+    wheel_radius_m: float = bounded(above=0.0)
+    wheel_base_m: float = bounded(above=0.0)
+    ticks_per_rev: int = bounded(minimum=1, integer=True)
 
     def __post_init__(self) -> None:
-        _positive(
-            "NominalRobot",
-            wheel_radius_m=self.wheel_radius_m,
-            wheel_base_m=self.wheel_base_m,
-            ticks_per_rev=self.ticks_per_rev,
-        )
-        if int(self.ticks_per_rev) != self.ticks_per_rev:
-            raise EstimationError(
-                f"NominalRobot: ticks_per_rev must be an integer, got {self.ticks_per_rev!r}"
-            )
+        validate_fields(self, EstimationError)
 
     @property
     def metres_per_tick(self) -> float:
@@ -202,23 +193,20 @@ class DeadReckoningNoise:
             (small; keeps the pose covariance positive definite).
     """
 
-    tick_std: float = 1.0 / math.sqrt(6.0)
-    gyro_noise_density_rad_s_sqrt_hz: float = math.radians(0.005)
-    gyro_bias_std_rad_s: float = math.radians(0.1)
-    gyro_bias_random_walk_rad_s_sqrt_s: float = math.radians(0.002)
-    accel_noise_density_m_s2_sqrt_hz: float = 400e-6 * _G_M_S2
-    accel_bias_std_m_s2: float = 20e-3 * _G_M_S2
-    accel_bias_random_walk_m_s2_sqrt_s: float = 0.05e-3 * _G_M_S2
-    wheel_radius_rel_std: float = 0.01
-    yaw_accel_std_rad_s2: float = 2.0 * 0.5 / 0.30
-    position_std_m_sqrt_s: float = 1e-4
-    heading_std_rad_sqrt_s: float = 1e-4
+    tick_std: float = bounded(1.0 / math.sqrt(6.0), above=0.0)
+    gyro_noise_density_rad_s_sqrt_hz: float = bounded(math.radians(0.005), above=0.0)
+    gyro_bias_std_rad_s: float = bounded(math.radians(0.1), above=0.0)
+    gyro_bias_random_walk_rad_s_sqrt_s: float = bounded(math.radians(0.002), above=0.0)
+    accel_noise_density_m_s2_sqrt_hz: float = bounded(400e-6 * _G_M_S2, above=0.0)
+    accel_bias_std_m_s2: float = bounded(20e-3 * _G_M_S2, above=0.0)
+    accel_bias_random_walk_m_s2_sqrt_s: float = bounded(0.05e-3 * _G_M_S2, above=0.0)
+    wheel_radius_rel_std: float = bounded(0.01, above=0.0)
+    yaw_accel_std_rad_s2: float = bounded(2.0 * 0.5 / 0.30, above=0.0)
+    position_std_m_sqrt_s: float = bounded(1e-4, above=0.0)
+    heading_std_rad_sqrt_s: float = bounded(1e-4, above=0.0)
 
     def __post_init__(self) -> None:
-        _positive(
-            "DeadReckoningNoise",
-            **{name: getattr(self, name) for name in self.__dataclass_fields__},
-        )
+        validate_fields(self, EstimationError)
 
     def process_cov(self, dt_s: float) -> np.ndarray:
         """``Q (8, 8)``, diagonal, of one step of ``dt_s`` seconds."""
@@ -452,52 +440,76 @@ def odometry_data(
 # --------------------------------------------------------------------------- the filters
 
 
+class Filter(StrEnum):
+    """The filter running the dead reckoning (the scenario's ``estimation.filter``)."""
+
+    UKF = "ukf"
+    """Unscented Kalman filter (scaled sigma points ``alpha = 1e-3`` by default)."""
+    IUKF = "iukf"
+    """Iterated UKF (paper 000; kappa sigma points by default)."""
+    EKF = "ekf"
+    """Extended Kalman filter."""
+    IEKF = "iekf"
+    """Iterated EKF."""
+
+    @property
+    def unscented(self) -> bool:
+        """True for the UKF and IUKF (unscented prediction)."""
+        return self in (Filter.UKF, Filter.IUKF)
+
+
+class StepEngine(StrEnum):
+    """How the dead-reckoning steps run."""
+
+    COMPILED = "compiled"
+    """The step specialised to this model (:mod:`localization.dead_reckoning_kernel`)."""
+    GENERIC = "generic"
+    """C's filter objects step by step: the reference, about a hundred times slower."""
+
+
 @dataclass(frozen=True)
 class DeadReckoningSettings:
-    """Which filter runs the dead reckoning.
+    """Which filter runs the dead reckoning, and how (validated at construction).
 
     Attributes:
-        filter: ``"ukf"``, ``"iukf"``, ``"ekf"`` or ``"iekf"`` (the scenario's
-            ``estimation.filter``).
+        filter: a :class:`Filter` (or its value; the scenario's ``estimation.filter``).
         points: sigma points of the unscented filters; ``None`` takes each filter's default
             (scaled points ``alpha = 1e-3`` for the UKF, kappa points for the IUKF, paper 000).
-        engine: ``"compiled"`` (the specialised step, :mod:`localization.dead_reckoning_kernel`,
-            default) or ``"generic"`` (C's filter objects step by step: the reference, about a
-            hundred times slower).
+        engine: a :class:`StepEngine` (or its value): ``"compiled"`` (default) or
+            ``"generic"``.
     """
 
-    filter: Literal["ukf", "iukf", "ekf", "iekf"] = "ukf"
+    filter: Filter = Filter.UKF
     points: SigmaPointScheme | None = None
-    engine: Literal["compiled", "generic"] = "compiled"
+    engine: StepEngine = StepEngine.COMPILED
 
     def __post_init__(self) -> None:
-        if self.filter not in FILTERS:
+        validate_fields(self, EstimationError)
+        if self.points is not None and not isinstance(self.points, SigmaPointScheme):
             raise EstimationError(
-                f"DeadReckoningSettings: filter must be one of {FILTERS}, got {self.filter!r}"
-            )
-        if self.engine not in ("compiled", "generic"):
-            raise EstimationError(
-                f"DeadReckoningSettings: engine must be 'compiled' or 'generic', got {self.engine!r}"
+                f"DeadReckoningSettings.points must be a sigma-point scheme or None, got {self.points!r}"
             )
 
     @property
     def unscented(self) -> bool:
         """True for the UKF and IUKF (unscented prediction)."""
-        return self.filter in ("ukf", "iukf")
+        return self.filter.unscented
 
     def sigma_points(self) -> SigmaPointScheme:
         """The sigma-point scheme in use (unscented filters)."""
         if self.points is not None:
             return self.points
-        return KappaSigmaPoints() if self.filter == "iukf" else ScaledSigmaPoints(alpha=1e-3)
+        return KappaSigmaPoints() if self.filter == Filter.IUKF else ScaledSigmaPoints(alpha=1e-3)
 
     def generic_filter(self):
         """C's filter object for this setting."""
-        if self.filter == "ukf":
+        if self.filter == Filter.UKF:
             return UnscentedKalmanFilter(points=self.sigma_points())
-        if self.filter == "iukf":
+        if self.filter == Filter.IUKF:
             return IteratedUnscentedKalmanFilter(points=self.sigma_points())
-        return ExtendedKalmanFilter() if self.filter == "ekf" else IteratedExtendedKalmanFilter()
+        if self.filter == Filter.EKF:
+            return ExtendedKalmanFilter()
+        return IteratedExtendedKalmanFilter()
 
 
 @dataclass(frozen=True, eq=False)
@@ -574,7 +586,7 @@ class DeadReckoning:
         self._cov = np.array(initial.cov)
         self._record(0)
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
-        if settings.engine == "compiled":
+        if settings.engine == StepEngine.COMPILED:
             self._compiled = _CompiledStep(data, settings)
         else:
             self._generic = settings.generic_filter()
@@ -630,7 +642,7 @@ class DeadReckoning:
             )
         start = self.index + 1
         if until_index >= start:
-            if self.settings.engine == "compiled":
+            if self.settings.engine == StepEngine.COMPILED:
                 self._mean, self._cov, self._speed_correction = self._compiled.run(
                     self._mean,
                     self._cov,

@@ -42,7 +42,7 @@ from localization import compiled_ekf
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import ConvergenceWarning, require_finite, wrap_columns
-from localization.models import MeasurementModel, ProcessModel
+from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 from localization.ukf import check_args
 
 
@@ -63,13 +63,13 @@ def _jacobian_of(model: ProcessModel | MeasurementModel, step: str) -> Callable[
 
 def ekf_predict(belief: Gaussian, model: ProcessModel, args: tuple, step: str) -> Gaussian:
     """``x- = f(x)``, ``P- = F P F^T + Q`` (additive noise only)."""
-    if compiled_path(model) and model.noise == "additive":
+    if compiled_path(model) and model.noise == ProcessNoise.ADDITIVE:
         done = compiled_ekf.predict(belief.mean, belief.cov, belief.angle_indices, model, args)
         if done is not None:
             return Gaussian.trusted(*done, belief.angle_indices)
     check_args(args, step)
     jacobian = _jacobian_of(model, step)
-    if model.noise != "additive":
+    if model.noise != ProcessNoise.ADDITIVE:
         raise EstimationError(f"{step}: the EKF family needs additive process noise")
     jac = jacobian(belief.mean, *args)
     mean = wrap_columns(np.array(model.f(belief.mean, *args), dtype=float), belief.angle_indices)

@@ -11,7 +11,7 @@ to the union of the component's boxes (in ``x, y``), ties to the smallest label.
 position box is the hull of its boxes (the paper's "rectangle"); a single component gives
 the hull of all boxes. :class:`FusionReport` says which component each row used.
 
-Options beside the paper's rule (:data:`FUSION_RULES`):
+Options beside the paper's rule (:class:`FusionRule`):
 
 - ``"clamp_heading"``: the clamp, and the heading clamped the same way to the component's
   heading interval, on the circle: a heading outside ``[lo, hi]`` (taken modulo ``2 pi``) goes
@@ -37,7 +37,8 @@ in :attr:`FusionReport.skipped`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Literal
 
 import numpy as np
@@ -47,8 +48,30 @@ from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import wrap_angle
 
-FUSION_RULES = ("clamp", "clamp_heading", "truncated", "truncated_heading")
 _TWO_PI = 2.0 * math.pi
+
+
+class FusionRule(StrEnum):
+    """How the fused branch is brought into the interval box (module docstring)."""
+
+    CLAMP = "clamp"
+    """The paper's rule: the position moved to the nearest point of the box."""
+    CLAMP_HEADING = "clamp_heading"
+    """The clamp, and the heading clamped to the heading interval on the circle."""
+    TRUNCATED = "truncated"
+    """The belief truncated to the position box (mean and covariance)."""
+    TRUNCATED_HEADING = "truncated_heading"
+    """The truncation, then the heading truncated to its interval too."""
+
+    @property
+    def corrects_heading(self) -> bool:
+        """True when the rule also brings the heading into the box's heading interval."""
+        return self in (FusionRule.CLAMP_HEADING, FusionRule.TRUNCATED_HEADING)
+
+    @property
+    def truncates(self) -> bool:
+        """True for the truncation rules (mean and covariance), False for the clamps (mean only)."""
+        return self in (FusionRule.TRUNCATED, FusionRule.TRUNCATED_HEADING)
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,7 +96,7 @@ class FusionReport:
     moved: np.ndarray
     heading_moved: np.ndarray
     skipped: bool = False
-    hull: np.ndarray | None = None
+    hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
 
 
 def check_boxes(boxes, labels=None) -> tuple[np.ndarray, np.ndarray]:
@@ -203,7 +226,7 @@ def fuse(
     boxes,
     labels=None,
     rows=(1,),
-    rule: str = "clamp",
+    rule: FusionRule | str = FusionRule.CLAMP,
     on_empty: Literal["raise", "skip"] = "raise",
 ) -> tuple[Gaussian, FusionReport]:
     """Fuse the rows ``rows`` of the batched ``belief (B, n)`` with the interval boxes.
@@ -216,7 +239,7 @@ def fuse(
             (``None``: one component).
         rows: the batch rows to fuse (default ``(1,)``: the fused branch beside the
             UKF-only row 0).
-        rule: one of :data:`FUSION_RULES`; ``"clamp"`` is the paper's.
+        rule: a :class:`FusionRule` (or its value); ``"clamp"`` is the paper's.
         on_empty: with no box, ``"raise"`` an :class:`EstimationError` or ``"skip"``.
 
     Returns:
@@ -225,8 +248,11 @@ def fuse(
     Raises:
         EstimationError: bad boxes, labels, rows or rule; no box under ``on_empty="raise"``.
     """
-    if rule not in FUSION_RULES:
-        raise EstimationError(f"fusion: rule must be one of {FUSION_RULES}, got {rule!r}")
+    try:
+        rule = FusionRule(rule)
+    except ValueError:
+        allowed = ", ".join(repr(str(r)) for r in FusionRule)
+        raise EstimationError(f"fusion: rule must be one of {allowed}, got {rule!r}") from None
     if on_empty not in ("raise", "skip"):
         raise EstimationError(f"fusion: on_empty must be 'raise' or 'skip', got {on_empty!r}")
     if not isinstance(belief, Gaussian) or belief.mean.ndim != 2 or belief.dim < 3:
@@ -270,12 +296,12 @@ def fuse(
     inside = (fused_mean[:, :2] >= hull[:, :2, 0]).all(axis=1) & (
         fused_mean[:, :2] <= hull[:, :2, 1]
     ).all(axis=1)
-    with_heading = rule.endswith("_heading")
+    with_heading = rule.corrects_heading
     theta = fused_mean[:, 2]
     heading_moved = np.zeros(count, dtype=bool)
     if with_heading:
         heading_moved = clamp_heading(theta, hull[:, 2]) != theta
-    if rule.startswith("clamp"):
+    if not rule.truncates:
         fused_mean[:, :2] = np.clip(
             fused_mean[:, :2], hull[:, :2, 0], hull[:, :2, 1]
         )  # nearest point of the box

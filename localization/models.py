@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from enum import StrEnum
 
 import numba
 import numpy as np
@@ -70,6 +70,16 @@ def _noise_covariance(matrix: np.ndarray, owner: str, name: str) -> np.ndarray:
     return out
 
 
+class ProcessNoise(StrEnum):
+    """How the process noise ``w`` enters the transition."""
+
+    ADDITIVE = "additive"
+    """``x(k+1) = f(x(k), *args) + w(k)``."""
+    AUGMENTED = "augmented"
+    """``x(k+1) = f(x(k), w(k), *args)``: the UKF draws sigma points of the state augmented
+    with ``w`` (paper 001 section III-C-2)."""
+
+
 @dataclass(frozen=True)
 class ProcessModel:
     """``x(k+1) = f(x(k), *args) + w(k)`` (additive) or ``f(x(k), w(k), *args)`` (augmented).
@@ -79,8 +89,7 @@ class ProcessModel:
         Q: ``(n, n)`` (additive) or ``(q, q)`` (augmented) noise covariance of ``w``, or a
             per-run ``(B, ., .)``; symmetric positive semi-definite.
         jacobian: ``F(x, *args) -> (..., n, n)``, needed by the EKF family (additive noise).
-        noise: ``"additive"`` or ``"augmented"`` (the UKF then draws sigma points of the
-            state augmented with ``w``, paper 001 section III-C-2).
+        noise: a :class:`ProcessNoise` (or its value), ``"additive"`` by default.
         noise_sqrt: computed, ``(..., q, q)`` a square root ``S S^T = Q`` (from the
             eigen-decomposition, so a singular ``Q`` is fine) for the augmented sigma points.
         point: optional per-point kernel computing ``f`` for one sigma point (module
@@ -92,7 +101,7 @@ class ProcessModel:
     f: Callable[..., np.ndarray]
     Q: np.ndarray
     jacobian: Callable[..., np.ndarray] | None = None
-    noise: Literal["additive", "augmented"] = "additive"
+    noise: ProcessNoise = ProcessNoise.ADDITIVE
     point: Callable[..., None] | None = None
     jacobian_point: Callable[..., None] | None = None
     noise_sqrt: np.ndarray = field(init=False, repr=False, compare=False)
@@ -102,10 +111,13 @@ class ProcessModel:
             raise EstimationError("ProcessModel: f must be callable")
         if self.jacobian is not None and not callable(self.jacobian):
             raise EstimationError("ProcessModel: jacobian must be callable or None")
-        if self.noise not in ("additive", "augmented"):
+        try:
+            object.__setattr__(self, "noise", ProcessNoise(self.noise))
+        except ValueError:
+            allowed = ", ".join(repr(str(n)) for n in ProcessNoise)
             raise EstimationError(
-                f"ProcessModel: noise must be 'additive' or 'augmented', got {self.noise!r}"
-            )
+                f"ProcessModel: noise must be one of {allowed}, got {self.noise!r}"
+            ) from None
         _check_kernel("ProcessModel", self.point)
         _check_kernel("ProcessModel", self.jacobian_point, "jacobian_point")
         q_cov = _noise_covariance(self.Q, "ProcessModel", "Q")

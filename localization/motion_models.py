@@ -71,7 +71,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
 
 import numba
 import numpy as np
@@ -79,7 +78,7 @@ import numpy as np
 from localization.compiled_linalg import wrap_angle as wrap_angle_scalar
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
-from localization.models import MeasurementModel, ProcessModel
+from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 
 Array = np.ndarray
 """A float array; shapes are given in the docstrings."""
@@ -787,9 +786,7 @@ class MotionModel:
         out[..., driven] += half
         return out
 
-    def process_model(
-        self, Q: Array, noise: Literal["additive", "augmented"] = "additive"
-    ) -> ProcessModel:
+    def process_model(self, Q: Array, noise: ProcessNoise = ProcessNoise.ADDITIVE) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
 
         ``noise="additive"``: ``f = transition`` with ``Q (n, n)`` and the Jacobian;
@@ -797,9 +794,9 @@ class MotionModel:
         the increments (e.g. ``np.diag(self.process_noise_std(dt_s) ** 2)``). Either way the
         UKF takes its compiled path (the step's argument is ``dt_s``); additive, the EKF too.
         """
-        if noise == "augmented":
+        if noise == ProcessNoise.AUGMENTED:
             return ProcessModel(
-                self.transition_with_noise, Q, noise="augmented", point=self.noisy_point
+                self.transition_with_noise, Q, noise=ProcessNoise.AUGMENTED, point=self.noisy_point
             )
         return ProcessModel(
             self.transition,

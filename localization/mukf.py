@@ -29,7 +29,7 @@ from localization.ekf import ExtendedKalmanFilter, joseph_covariance, kalman_gai
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import require_finite, symmetrise
-from localization.models import MeasurementModel, ProcessModel
+from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 from localization.ukf import UnscentedKalmanFilter, check_args
 
 
@@ -121,7 +121,7 @@ class ModifiedKalmanFilter:
         """
         step = f"{self.name} predict"
         check_args(args, step)
-        if model.noise != "additive":
+        if model.noise != ProcessNoise.ADDITIVE:
             raise EstimationError(f"{step}: the modified filters need additive process noise")
         n = self.subsystem.n_linear
         full = belief.full

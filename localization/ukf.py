@@ -55,7 +55,7 @@ from localization import compiled_ukf
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import PDPolicy, cholesky, require_finite, solve, wrap_columns
-from localization.models import MeasurementModel, ProcessModel
+from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 from localization.sigma_points import (
     ScaledSigmaPoints,
     SigmaPointScheme,
@@ -173,7 +173,7 @@ class UnscentedKalmanFilter:
         mean = belief.mean
         n = mean.shape[-1]
         if model.point is not None:
-            dim = n + model.Q.shape[-1] if model.noise == "augmented" else n
+            dim = n + model.Q.shape[-1] if model.noise == ProcessNoise.AUGMENTED else n
             done = compiled_ukf.predict(
                 self.points.weights(dim), mean, belief.cov, belief.angle_indices, model, args
             )
@@ -188,7 +188,7 @@ class UnscentedKalmanFilter:
             return joined(steps, belief.angle_indices)
         check_args(args, "UKF predict")
         chol, _ = cholesky(belief.cov, self.pd_policy, "UKF predict")
-        if model.noise == "additive":
+        if model.noise == ProcessNoise.ADDITIVE:
             weights = self.points.weights(n)
             images = model.f(sigma_points(mean, chol, weights), *at_sigma_points(args, batch))
         else:
@@ -203,7 +203,7 @@ class UnscentedKalmanFilter:
             images = model.f(points[..., :n], points[..., n:], *at_sigma_points(args, batch))
         angles = belief.angle_indices
         mean, cov, _ = unscented_moments(images, weights, angles)
-        if model.noise == "additive":
+        if model.noise == ProcessNoise.ADDITIVE:
             cov = cov + model.Q  # paper 004 eq. 6 (both exactly symmetric)
         require_finite(mean, "the predicted mean (model output)", "UKF predict")
         return Gaussian.trusted(mean, cov, angles)

@@ -17,6 +17,7 @@ import numpy as np
 
 from robotsim.errors import RobotsimError
 from robotsim.robot import RobotParams
+from validated_records import bounded, validate_fields
 
 
 class Controller(Protocol):
@@ -55,9 +56,9 @@ class Route:
     """
 
     waypoints_m: np.ndarray
-    cruise_speed_m_s: float = 0.4
-    lookahead_m: float = 0.5
-    goal_tolerance_m: float = 0.05
+    cruise_speed_m_s: float = bounded(0.4, above=0.0, maximum=10.0)
+    lookahead_m: float = bounded(0.5, above=0.0, maximum=10_000.0)
+    goal_tolerance_m: float = bounded(0.05, above=0.0, maximum=10_000.0)
     loop: bool = False
 
     def __post_init__(self) -> None:
@@ -70,10 +71,7 @@ class Route:
             raise RobotsimError("route waypoints must be finite")
         if self.loop and len(waypoints) < 2:
             raise RobotsimError("a looping route needs at least 2 waypoints")
-        for name in ("cruise_speed_m_s", "lookahead_m", "goal_tolerance_m"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise RobotsimError(f"route {name} must be positive and finite, got {value}")
+        validate_fields(self, RobotsimError)
         waypoints.setflags(write=False)
         object.__setattr__(self, "waypoints_m", waypoints)
 
@@ -100,8 +98,8 @@ class PurePursuit:
     def _point(self, index: int) -> tuple[float, float]:
         """Path point ``index``: 0 is the start, then the waypoints (cycling if looping)."""
         if index == 0:
-            if self._start is None:  # set from the pose of the first command()
-                raise RuntimeError("PurePursuit: the path has no start before the first command")
+            if self._start is None:  # set by the first command
+                raise RobotsimError("pure pursuit: the path has no start before the first command")
             return self._start
         count = len(self._waypoints)
         return self._waypoints[

@@ -11,12 +11,12 @@ with the true radii, which differ by a calibration error (what makes odometry dr
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from robotsim.errors import RobotsimError
+from validated_records import bounded, validate_fields
 
 
 def wrap_angle(angle_rad):
@@ -35,13 +35,25 @@ def wrap_angle(angle_rad):
     return wrapped
 
 
+#: Largest relative difference between a true wheel radius and the nominal one: a calibration
+#: error of real wheels is a few per mille; the dead-reckoning model is first order in it.
+MAX_WHEEL_RADIUS_ERROR = 0.1
+
+#: Largest encoder resolution, ticks per revolution (2^24, the finest absolute encoders): the
+#: cumulative tick count of the longest run at the largest speed over the smallest wheel stays
+#: far inside int64 (1e4 rad/s over 1e7 s is 3e17 ticks at this resolution).
+MAX_TICKS_PER_REV = 2**24
+
+
 @dataclass(frozen=True)
 class RobotParams:
-    """A disk-shaped differential-drive robot.
+    """A disk-shaped differential-drive robot (bounds declared beside each field: a robot
+    the simulator can move with every number in range).
 
     Attributes:
         wheel_radius_m: nominal wheel radius, the one the estimator knows.
-        true_wheel_radius_left_m, true_wheel_radius_right_m: the radii the world uses.
+        true_wheel_radius_left_m, true_wheel_radius_right_m: the radii the world uses
+            (within :data:`MAX_WHEEL_RADIUS_ERROR` of the nominal one).
         wheel_base_m: distance between the wheel contact points.
         ticks_per_rev: encoder ticks per wheel revolution.
         radius_m: radius of the footprint disk (collision shape; the sonar belt sits on it).
@@ -51,26 +63,26 @@ class RobotParams:
             ``alpha_max_rad_s2 = 2 a_max / wheel_base`` (each wheel at most ``a_max``).
     """
 
-    wheel_radius_m: float = 0.05
-    true_wheel_radius_left_m: float = 0.0503
-    true_wheel_radius_right_m: float = 0.0498
-    wheel_base_m: float = 0.30
-    ticks_per_rev: int = 2048
-    radius_m: float = 0.20
-    mass_kg: float = 8.0
-    v_max_m_s: float = 0.6
-    omega_max_rad_s: float = 1.5
-    a_max_m_s2: float = 0.5
+    wheel_radius_m: float = bounded(0.05, minimum=1e-3, maximum=1.0)
+    true_wheel_radius_left_m: float = bounded(0.0503, minimum=1e-3, maximum=1.0)
+    true_wheel_radius_right_m: float = bounded(0.0498, minimum=1e-3, maximum=1.0)
+    wheel_base_m: float = bounded(0.30, minimum=0.01, maximum=10.0)
+    ticks_per_rev: int = bounded(2048, minimum=1, maximum=MAX_TICKS_PER_REV, integer=True)
+    radius_m: float = bounded(0.20, minimum=0.01, maximum=10.0)
+    mass_kg: float = bounded(8.0, minimum=0.1, maximum=10_000.0)
+    v_max_m_s: float = bounded(0.6, above=0.0, maximum=10.0)
+    omega_max_rad_s: float = bounded(1.5, above=0.0, maximum=20.0)
+    a_max_m_s2: float = bounded(0.5, above=0.0, maximum=20.0)
 
     def __post_init__(self) -> None:
-        for field in fields(self):
-            value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise RobotsimError(f"robot {field.name} must be a number, got {value!r}")
-            if not (math.isfinite(value) and value > 0):
-                raise RobotsimError(f"robot {field.name} must be positive and finite, got {value}")
-        if int(self.ticks_per_rev) != self.ticks_per_rev:
-            raise RobotsimError(f"robot ticks_per_rev must be an integer, got {self.ticks_per_rev}")
+        validate_fields(self, RobotsimError)
+        for name in ("true_wheel_radius_left_m", "true_wheel_radius_right_m"):
+            error = getattr(self, name) / self.wheel_radius_m - 1.0
+            if abs(error) > MAX_WHEEL_RADIUS_ERROR:
+                raise RobotsimError(
+                    f"RobotParams.{name} must be within {MAX_WHEEL_RADIUS_ERROR:.0%} of "
+                    f"wheel_radius_m ({self.wheel_radius_m:g} m), got {getattr(self, name):g} m"
+                )
 
     @property
     def alpha_max_rad_s2(self) -> float:

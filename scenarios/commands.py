@@ -22,6 +22,9 @@ from scenarios.spec import DEFAULT_MAP, ScenarioSpec, builtin_names, load_scenar
 #: Where ``robotsim run`` writes when no path is given.
 DEFAULT_RUNS_DIR = Path("runs")
 
+#: The options of ``robotsim run`` that override a key of the scenario's ``[run]``.
+RUN_OPTIONS = {"run.seed": "--seed", "run.duration_s": "--duration"}
+
 #: The part of the progress bar the run (simulation and estimation) fills; the recording
 #: fills the rest.
 RUN_SHARE = 0.9
@@ -59,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
 
-    spec = load_scenario(args.scenario).with_run(seed=args.seed, duration_s=args.duration)
+    spec = with_run_options(load_scenario(args.scenario), args.seed, args.duration)
     stem = f"{spec.name}-seed{spec.run.seed}"
     rrd_path = args.rrd or DEFAULT_RUNS_DIR / f"{stem}.rrd"
     summary_path = args.summary or DEFAULT_RUNS_DIR / f"{stem}.json"
@@ -97,6 +100,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"robotsim: {failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def with_run_options(
+    spec: ScenarioSpec, seed: int | None, duration_s: float | None
+) -> ScenarioSpec:
+    """``spec`` with the ``--seed`` and ``--duration`` given on the command line (None: the
+    scenario's); a value out of bounds is blamed on its option."""
+    try:
+        return spec.with_run(seed=seed, duration_s=duration_s)
+    except ScenarioError as exc:
+        raise ScenarioError(None, RUN_OPTIONS.get(exc.key or "", exc.key), exc.reason) from None
 
 
 def guarantee_failure(spec: ScenarioSpec, summary: dict[str, Any]) -> str | None:

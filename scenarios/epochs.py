@@ -14,13 +14,20 @@ import dataclasses
 
 import numpy as np
 
-from intervals.boxes import area_xy, contains_points
+from intervals.boxes import Subpaving, area_xy, contains_points
 from intervals.sonar import SonarBelt, SonarScan
-from intervals.tracker import STATUSES, EpochResult, IntervalTracker, TrackerSettings
+from intervals.tracker import EpochResult, EpochStatus, IntervalTracker, TrackerSettings
 
-STATUS = STATUSES
+#: The epoch states in the order of their codes in :attr:`EpochLog.status`.
+STATUS = tuple(EpochStatus)
 GLOBAL, TRACKING, INCONSISTENT, LOST = (
-    STATUS.index(name) for name in ("global", "tracking", "inconsistent", "lost")
+    STATUS.index(status)
+    for status in (
+        EpochStatus.GLOBAL,
+        EpochStatus.TRACKING,
+        EpochStatus.INCONSISTENT,
+        EpochStatus.LOST,
+    )
 )
 
 #: Epoch states with a set, the ones the fusion clamps to.
@@ -39,7 +46,7 @@ class EpochRunner:
     ):
         self._tracker = IntervalTracker(tracker_settings, map_bounds)
         self._segments, self._boundary, self._belt = segments, boundary, belt
-        self._previous = None
+        self._previous: Subpaving | None = None
 
     def step(self, readings_m: np.ndarray, dt_s: float) -> EpochResult:
         """One epoch on the scan ``readings_m (k,)`` taken ``dt_s`` after the previous one."""

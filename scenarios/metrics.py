@@ -146,7 +146,8 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
     with_set = int(has_set.sum())
     hull_w = epochs.hull[has_set, :2, 1] - epochs.hull[has_set, :2, 0]
     counts = {
-        name: int(np.count_nonzero(epochs.status == code)) for code, name in enumerate(STATUS)
+        str(status): int(np.count_nonzero(epochs.status == code))
+        for code, status in enumerate(STATUS)
     }
     return {
         "epochs": len(epochs.t_s),

@@ -28,11 +28,9 @@ import numpy as np
 
 from intervals.errors import IntervalError
 from intervals.sonar import SonarBelt
-from intervals.tracker import TrackerSettings
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningNoise,
-    DeadReckoningSettings,
     NominalRobot,
     initial_belief,
     odometry_data,
@@ -217,22 +215,6 @@ def dead_reckoning_noise(spec: ScenarioSpec) -> DeadReckoningNoise:
     )
 
 
-def tracker_settings(spec: ScenarioSpec) -> TrackerSettings:
-    """The interval tracker's settings: the scenario's ``[estimation]`` and the robot's limits."""
-    est = spec.estimation
-    return TrackerSettings(
-        v_max_m_s=spec.robot.v_max_m_s,
-        omega_max_rad_s=spec.robot.omega_max_rad_s,
-        eps_m=est.eps_m,
-        heading_scale_m_per_rad=est.heading_scale_m_per_rad,
-        q_max=est.q_max,
-        tracker=est.tracker,
-        imagesp_pitch_m=est.imagesp_pitch_m,
-        guaranteed=est.guaranteed,
-        ray_test=est.ray_test,
-    )
-
-
 def estimate(
     spec: ScenarioSpec, log: SimulationLog, progress: Callable[[float], None] | None = None
 ) -> tuple[Estimation, StageTimes]:
@@ -250,15 +232,11 @@ def estimate(
         log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal, noise
     )
     dr = DeadReckoning(
-        data,
-        initial_belief(spec.start_pose, START_POSE_STD, noise),
-        DeadReckoningSettings(est.filter),
+        data, initial_belief(spec.start_pose, START_POSE_STD, noise), est.dead_reckoning
     )
 
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    epochs = EpochRunner(
-        tracker_settings(spec), spec.map.segments, spec.map.boundary, spec.map.bounds, belt
-    )
+    epochs = EpochRunner(est.intervals, spec.map.segments, spec.map.boundary, spec.map.bounds, belt)
     stride = est.scan_stride(spec.sensors.sonar.rate_hz)
     scans = np.arange(0, len(log.sonar_t_s), stride)
     epoch_index = np.searchsorted(log.t_s, log.sonar_t_s[scans] - 0.5 / log.rate_hz)

@@ -8,8 +8,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     One line shown by ``robotsim scenarios``.
 ``[run]``
     ``duration_s`` (60.0), ``seed`` (0), and the sample rate of the simulation and of the
-    proprioceptive sensors: ``rate_hz`` (100.0) or ``dt_s`` (0.01), not both. A run has
-    from 1 to :data:`MAX_SAMPLES` samples (``duration_s * rate_hz``).
+    proprioceptive sensors: ``rate_hz`` (100.0, from :data:`MIN_RATE_HZ` to
+    :data:`MAX_RATE_HZ`) or ``dt_s`` (0.01), not both. A run has from 1 to
+    :data:`MAX_SAMPLES` samples (``duration_s * rate_hz``).
 ``[map]``
     Exactly one of ``builtin`` (a name of ``robotsim.maps.BUILTIN_MAP_NAMES``),
     ``segments`` (an array of ``[[ax, ay], [bx, by]]`` in metres) or ``file`` (a ``.wkt``,
@@ -31,24 +32,35 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
     sample; a faster or off-beat sonar is refused rather than silently slowed).
 ``[estimation]``
-    The localisation pipeline (paper 002): ``filter`` (``"ukf"``; or ``"iukf"``, ``"ekf"``,
-    ``"iekf"``), ``tracker`` (``"sivia"`` or ``"imagesp"``), ``fusion`` (``"clamp"``, the
-    paper's rule, or another rule of ``localization.fusion``), ``eps_m`` (0.05),
-    ``q_max`` (1), ``guaranteed`` (true), ``interval_rate_hz`` (the sonar's rate: an epoch at every scan),
-    ``heading_scale_m_per_rad`` (1.0), ``imagesp_pitch_m`` (0.2), ``free_space``
-    (default: true exactly when the sonar never loses an echo) and ``ray_test`` (default: true
-    exactly when the sonar's half-aperture is at most 0.1 rad). See :class:`EstimationSpec`.
+    The localisation pipeline (paper 002), read into the records of the packages that use
+    it: ``filter`` (``localization.dead_reckoning.DeadReckoningSettings``: ``"ukf"``; or
+    ``"iukf"``, ``"ekf"``, ``"iekf"``); ``tracker`` (``"sivia"`` or ``"imagesp"``), ``eps_m``
+    (0.05), ``q_max`` (1), ``guaranteed`` (true), ``heading_scale_m_per_rad`` (1.0),
+    ``imagesp_pitch_m`` (0.2) and ``ray_test`` (default: true exactly when the sonar's
+    half-aperture is at most 0.1 rad) (``intervals.tracker.TrackerSettings``, with the
+    robot's limits); ``fusion`` (``"clamp"``, the paper's rule, or another
+    ``localization.fusion.FusionRule``), ``interval_rate_hz`` (the sonar's rate: an epoch at
+    every scan) and ``free_space`` (default: true exactly when the sonar never loses an
+    echo). See :class:`EstimationSpec`.
 
-Every mistake raises ``ScenarioError(file, "table.key", reason)``.
+Every number is checked against the bounds declared beside its field in the record that
+holds it (``records.bounded``: physical limits that keep every integer and float the
+simulator and the filters compute in range), every choice against its ``StrEnum``; the
+records check themselves the same way when built in code. Every mistake raises
+``ScenarioError(file, "table.key", reason)``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 import tomllib
+import types
+import typing
 from collections.abc import Callable
+from enum import Enum
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -56,18 +68,20 @@ from typing import Any
 import numpy as np
 import shapely
 
-from intervals.tracker import TRACKERS
-from localization.fusion import FUSION_RULES
+from intervals.tracker import TrackerSettings
+from localization.dead_reckoning import DeadReckoningSettings
+from localization.fusion import FusionRule
 from robotsim.control import Plan, Route, ScriptedProfile
 from robotsim.errors import RobotsimError
 from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
 from robotsim.robot import RobotParams, wrap_angle
 from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
-from robotsim.sensors.sonar import SonarBeltParams
+from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
 from robotsim.world import World
 from scenarios.errors import ScenarioError
 from scenarios.tables import Table
+from validated_records import Bounds, bounded, choices, declared_bounds, validate_fields
 
 #: The built-in scenarios: one TOML file per built-in map, in ``scenarios/builtin/``.
 BUILTIN_FOLDER = resources.files("scenarios") / "builtin"
@@ -81,9 +95,12 @@ DEFAULT_MAP = "hall"
 #: about 10 GB of logs and hours of simulation; beyond, refused before anything runs.
 MAX_SAMPLES = 10_000_000
 
-#: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
-#: (a millimetre is far below the sonar's error bounds).
-MIN_EPS_M = 1e-3
+#: The range of the simulation rate, hertz: below 1 Hz the physics and the encoders lose
+#: the motion; above 10 kHz a run of any length is mostly overhead. With
+#: :data:`MAX_SAMPLES` they bound a run to 1e7 s, which keeps the encoders' cumulative tick
+#: counts inside int64 (``robotsim.robot.MAX_TICKS_PER_REV``).
+MIN_RATE_HZ = 1.0
+MAX_RATE_HZ = 10_000.0
 
 #: Tolerance on the whole number of samples between two sonar scans.
 RATE_RATIO_TOL = 1e-9
@@ -91,23 +108,44 @@ RATE_RATIO_TOL = 1e-9
 #: The plan of a scenario without a route: no motion.
 STAND_STILL = ScriptedProfile(t_s=np.zeros(1), v_m_s=np.zeros(1), omega_rad_s=np.zeros(1))
 
-#: Filters the dead reckoning may run (``localization``): UKF, iterated UKF, EKF, iterated EKF.
-FILTERS = ("ukf", "iukf", "ekf", "iekf")
+#: The keys of ``[estimation]`` that are fields of ``localization``'s and ``intervals``'
+#: settings records (same names); the table's other keys are the fields of
+#: :class:`EstimationSpec` itself.
+DEAD_RECKONING_KEYS = ("filter",)
+TRACKER_KEYS = (
+    "tracker",
+    "eps_m",
+    "q_max",
+    "guaranteed",
+    "heading_scale_m_per_rad",
+    "imagesp_pitch_m",
+    "ray_test",
+)
 
 
 # ---------------------------------------------------------------------------------------
 # The spec: a frozen tree
 # ---------------------------------------------------------------------------------------
+#: A spec record built in code with a bad field: ``ScenarioError`` without file or key.
+_CodeError = functools.partial(ScenarioError, None, None)
+
+
 @dataclasses.dataclass(frozen=True)
 class RunSpec:
-    """Length, randomness and sampling of one run."""
+    """Length, randomness and sampling of one run (from 1 to :data:`MAX_SAMPLES` samples)."""
 
-    duration_s: float = DEFAULT_DURATION_S
-    """Simulated time, seconds (> 0)."""
-    seed: int = DEFAULT_SEED
-    """Seed of the run's ``numpy.random.Generator`` (>= 0)."""
-    rate_hz: float = DEFAULT_RATE_HZ
-    """Simulation and proprioceptive sensor rate, hertz (> 0); ``dt_s = 1 / rate_hz``."""
+    duration_s: float = bounded(DEFAULT_DURATION_S, above=0.0)
+    """Simulated time, seconds."""
+    seed: int = bounded(DEFAULT_SEED, minimum=0, integer=True)
+    """Seed of the run's ``numpy.random.Generator``."""
+    rate_hz: float = bounded(DEFAULT_RATE_HZ, minimum=MIN_RATE_HZ, maximum=MAX_RATE_HZ)
+    """Simulation and proprioceptive sensor rate, hertz; ``dt_s = 1 / rate_hz``."""
+
+    def __post_init__(self) -> None:
+        validate_fields(self, _CodeError)
+        reason = _sample_count_problem(self.duration_s, self.rate_hz)
+        if reason is not None:
+            raise ScenarioError(None, None, f"RunSpec.duration_s: {reason}")
 
     @property
     def dt_s(self) -> float:
@@ -128,41 +166,75 @@ class SensorsSpec:
 @dataclasses.dataclass(frozen=True)
 class EstimationSpec:
     """Settings of the localisation pipeline (paper 002): dead reckoning at the run's rate,
-    an interval epoch at the sonar scans, the fusion of the two."""
+    an interval epoch at the sonar scans, the fusion of the two.
 
-    filter: str = "ukf"
-    """The dead-reckoning filter: one of :data:`FILTERS`."""
-    tracker: str = "sivia"
-    """The interval tracker's prediction: ``"sivia"`` (hull grown by the physical limits,
-    inverted as one box) or ``"imagesp"`` (every box mapped, then contracted)."""
-    fusion: str = "clamp"
-    """The fusion rule of ``localization.fusion``; ``"clamp"`` is the paper's (section 4)."""
-    eps_m: float = 0.05
-    """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m (>= MIN_EPS_M)."""
-    q_max: int = 1
-    """Largest number of outlying sonar readings GOMNE may assume per epoch (0 to the belt size less one)."""
-    guaranteed: bool = True
-    """Keep the ``q_max``-relaxed set, which holds the truth whenever a scan has at most
-    ``q_max`` outliers (true), or GOMNE's set at the smallest ``q`` explaining the scan
-    (false: tighter, but outliers that happen to fit another pose make it miss the truth)."""
-    interval_rate_hz: float = 1.0
+    It holds the records of the packages that use them (each setting defined and validated
+    once, there) and the settings of the pipeline itself.
+    """
+
+    intervals: TrackerSettings
+    """The interval tracker (``intervals.tracker``): its prediction ``tracker``, ``eps_m``,
+    ``q_max``, ``guaranteed``, ``heading_scale_m_per_rad``, ``imagesp_pitch_m``, ``ray_test``
+    (the keys of the same names) and the robot's limits (from ``[robot]``)."""
+    dead_reckoning: DeadReckoningSettings = dataclasses.field(default_factory=DeadReckoningSettings)
+    """The dead-reckoning filter (``localization.dead_reckoning``; the key ``filter``)."""
+    fusion: FusionRule = FusionRule.CLAMP
+    """The fusion rule (``localization.fusion``); ``"clamp"`` is the paper's (section 4)."""
+    interval_rate_hz: float = bounded(1.0, above=0.0)
     """Interval epochs per second: one every ``sonar.rate_hz / interval_rate_hz`` scans (a
     whole number); a scenario file's default is the sonar's rate (an epoch at every scan)."""
-    heading_scale_m_per_rad: float = 1.0
-    """Metres per radian when the heading width is compared with position widths."""
-    imagesp_pitch_m: float = 0.2
-    """Grid pitch of the IMAGESP prediction (scaled like ``eps_m``; at least ``eps_m``)."""
     free_space: bool = True
     """Use no-echo readings as free space up to ``d_max``: sound only when the sonar never
-    loses an echo, hence the default ``lost_echo_prob == 0``."""
-    ray_test: bool | None = None
-    """Add the ray test of ``intervals.rays`` to the sonar box test: tighter sets (on ``hall``'s
-    600 s run a quarter smaller, up to 60 % on thin cones) for about 4 ms more per epoch;
-    ``None`` (the key absent): only when the half-aperture is at most 0.1 rad."""
+    loses an echo, hence the file's default ``lost_echo_prob == 0``."""
+
+    def __post_init__(self) -> None:
+        validate_fields(self, _CodeError)
+        for name, kind in (
+            ("intervals", TrackerSettings),
+            ("dead_reckoning", DeadReckoningSettings),
+        ):
+            if not isinstance(getattr(self, name), kind):
+                raise ScenarioError(None, None, f"EstimationSpec.{name} must be a {kind.__name__}")
 
     def scan_stride(self, sonar_rate_hz: float) -> int:
         """Scans per interval epoch (1: every scan)."""
-        return int(round(sonar_rate_hz / self.interval_rate_hz))
+        return round(sonar_rate_hz / self.interval_rate_hz)
+
+    @classmethod
+    def _own_keys(cls) -> tuple[str, ...]:
+        """The keys of ``[estimation]`` that are fields of this record (not of the parts)."""
+        parts = ("intervals", "dead_reckoning")
+        return tuple(f.name for f in dataclasses.fields(cls) if f.name not in parts)
+
+    def as_keys(self) -> dict[str, Any]:
+        """The settings as the keys of an ``[estimation]`` table (choices as their strings)."""
+        records = (
+            (self.dead_reckoning, DEAD_RECKONING_KEYS),
+            (self.intervals, TRACKER_KEYS),
+            (self, self._own_keys()),
+        )
+        keys = {key: getattr(record, key) for record, names in records for key in names}
+        return {key: str(v) if isinstance(v, Enum) else v for key, v in keys.items()}
+
+    def with_keys(self, **changes: Any) -> EstimationSpec:
+        """These settings with keys of the ``[estimation]`` table replaced (``tracker="imagesp"``,
+        ``q_max=2``, ``filter="ekf"``...), each in the record that holds it."""
+        own = self._own_keys()
+        unknown = set(changes) - set(own) - set(TRACKER_KEYS) - set(DEAD_RECKONING_KEYS)
+        if unknown:
+            raise ScenarioError(
+                None, None, f"not keys of [estimation]: {', '.join(sorted(unknown))}"
+            )
+
+        def part(keys: typing.Iterable[str]) -> dict[str, Any]:
+            return {key: value for key, value in changes.items() if key in keys}
+
+        return dataclasses.replace(
+            self,
+            intervals=dataclasses.replace(self.intervals, **part(TRACKER_KEYS)),
+            dead_reckoning=dataclasses.replace(self.dead_reckoning, **part(DEAD_RECKONING_KEYS)),
+            **part(own),
+        )
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -184,23 +256,39 @@ class ScenarioSpec:
     sensors: SensorsSpec
     estimation: EstimationSpec
 
+    def __post_init__(self) -> None:
+        problem = estimation_problem(self.estimation, self.robot, self.sensors.sonar)
+        if problem is not None:
+            key, reason = problem
+            raise ScenarioError(self.source, f"estimation.{key}", reason)
+
     def with_run(self, *, seed: int | None = None, duration_s: float | None = None) -> ScenarioSpec:
-        """This scenario with the seed and/or duration replaced (the CLI's ``--seed``/``--duration``)."""
-        run = self.run
-        if seed is not None:
-            if seed < 0:
-                raise ScenarioError(None, "--seed", f"must be >= 0, got {seed}")
-            run = dataclasses.replace(run, seed=seed)
-        if duration_s is not None:
-            if not (math.isfinite(duration_s) and duration_s > 0):
-                raise ScenarioError(
-                    None, "--duration", f"must be a finite number > 0, got {duration_s}"
-                )
-            reason = _sample_count_problem(duration_s, run.rate_hz)
+        """This scenario with the seed and/or duration replaced.
+
+        Raises:
+            ScenarioError: a value out of :class:`RunSpec`'s bounds, keyed ``run.seed`` or
+                ``run.duration_s`` (without a file: the values do not come from it).
+        """
+        changes = {"seed": seed, "duration_s": duration_s}
+        for name, value in changes.items():
+            bounds = declared_bounds(RunSpec, name)
+            reason = None if value is None or bounds is None else bounds.problem(value)
             if reason is not None:
-                raise ScenarioError(None, "--duration", reason)
-            run = dataclasses.replace(run, duration_s=duration_s)
+                raise ScenarioError(None, f"run.{name}", reason)
+        if duration_s is not None:
+            reason = _sample_count_problem(duration_s, self.run.rate_hz)
+            if reason is not None:
+                raise ScenarioError(None, "run.duration_s", reason)
+        run = dataclasses.replace(
+            self.run,
+            seed=self.run.seed if seed is None else seed,
+            duration_s=self.run.duration_s if duration_s is None else duration_s,
+        )
         return dataclasses.replace(self, run=run)
+
+    def with_estimation(self, **changes: Any) -> ScenarioSpec:
+        """This scenario with keys of ``[estimation]`` replaced (:meth:`EstimationSpec.with_keys`)."""
+        return dataclasses.replace(self, estimation=self.estimation.with_keys(**changes))
 
 
 # ---------------------------------------------------------------------------------------
@@ -263,7 +351,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     _check_start(robot_table, segment_map, start_pose, robot)
     plan = _read_route(top.take_table("route"), segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
-    estimation = _read_estimation(top.take_table("estimation"), sensors.sonar)
+    estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar)
     top.finish()
     return ScenarioSpec(
         name=name,
@@ -283,16 +371,20 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
 # Tables
 # ---------------------------------------------------------------------------------------
 def _read_run(table: Table) -> RunSpec:
-    duration_s = table.take_float("duration_s", DEFAULT_DURATION_S, above=0.0)
-    seed = table.take_int("seed", DEFAULT_SEED, minimum=0)
+    def bounds(name: str) -> Bounds | None:
+        return declared_bounds(RunSpec, name)
+
+    duration_s = table.take_float("duration_s", DEFAULT_DURATION_S, bounds=bounds("duration_s"))
+    seed = table.take_int("seed", DEFAULT_SEED, bounds=bounds("seed"))
     if table.has("rate_hz") and table.has("dt_s"):
         raise table.error("dt_s", "give rate_hz or dt_s, not both")
     rate_key = "dt_s" if table.has("dt_s") else "rate_hz"
     if table.has("dt_s"):
-        rate_hz = 1.0 / table.take_float("dt_s", above=0.0)
+        period = Bounds(minimum=1.0 / MAX_RATE_HZ, maximum=1.0 / MIN_RATE_HZ)
+        rate_hz = 1.0 / table.take_float("dt_s", bounds=period)
         table.take_float("rate_hz", None)
     else:
-        rate_hz = table.take_float("rate_hz", DEFAULT_RATE_HZ, above=0.0)
+        rate_hz = table.take_float("rate_hz", DEFAULT_RATE_HZ, bounds=bounds("rate_hz"))
         table.take_float("dt_s", None)
     table.finish()
     reason = _sample_count_problem(duration_s, rate_hz)
@@ -450,7 +542,9 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
         raise table.error(
             "count", "give count (an even belt) or mount_xy and mount_angle_rad, not both"
         )
-    count = table.take_int("count", None, minimum=1)
+    count = table.take_int(
+        "count", None, bounds=Bounds(minimum=1, maximum=MAX_BELT_COUNT, integer=True)
+    )
     belt = {} if count is None else {"count": count}
     try:
         default = SonarBeltParams.default_belt(robot_radius_m=robot.radius_m, **belt)
@@ -472,49 +566,61 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
     return sonar
 
 
-def _read_estimation(table: Table, sonar: SonarBeltParams) -> EstimationSpec:
-    """The ``[estimation]`` table, checked against the sonar belt it will read."""
-    default = EstimationSpec()
-    values = {
-        "filter": table.take_str("filter", default.filter, choices=FILTERS),
-        "tracker": table.take_str("tracker", default.tracker, choices=TRACKERS),
-        "fusion": table.take_str("fusion", default.fusion, choices=FUSION_RULES),
-        "eps_m": table.take_float("eps_m", default.eps_m, minimum=MIN_EPS_M),
-        "q_max": table.take_int("q_max", default.q_max, minimum=0),
-        "guaranteed": table.take_bool("guaranteed", default.guaranteed),
-        "interval_rate_hz": table.take_float("interval_rate_hz", sonar.rate_hz, above=0.0),
-        "heading_scale_m_per_rad": table.take_float(
-            "heading_scale_m_per_rad", default.heading_scale_m_per_rad, above=0.0
-        ),
-        "imagesp_pitch_m": table.take_float("imagesp_pitch_m", default.imagesp_pitch_m, above=0.0),
-        "free_space": table.take_bool("free_space", sonar.lost_echo_prob == 0.0),
-        "ray_test": table.take_bool("ray_test", default.ray_test),
-    }
-    table.finish()
-    if values["q_max"] >= sonar.count:
-        raise table.error(
+def _read_estimation(table: Table, robot: RobotParams, sonar: SonarBeltParams) -> EstimationSpec:
+    """The ``[estimation]`` table, checked against the robot and the sonar belt it will read."""
+    limits = TrackerSettings(v_max_m_s=robot.v_max_m_s, omega_max_rad_s=robot.omega_max_rad_s)
+    own_defaults = EstimationSpec(
+        intervals=limits,
+        interval_rate_hz=sonar.rate_hz,
+        free_space=sonar.lost_echo_prob == 0.0,
+    )
+    estimation = _read_params(
+        table,
+        own_defaults,
+        skip=("intervals", "dead_reckoning"),
+        parts={
+            "intervals": (limits, TRACKER_KEYS),
+            "dead_reckoning": (own_defaults.dead_reckoning, DEAD_RECKONING_KEYS),
+        },
+    )
+    problem = estimation_problem(estimation, robot, sonar)
+    if problem is not None:
+        raise table.error(*problem)
+    return estimation
+
+
+def estimation_problem(
+    estimation: EstimationSpec, robot: RobotParams, sonar: SonarBeltParams
+) -> tuple[str, str] | None:
+    """``(key, reason)``: why ``estimation`` does not fit the robot and the sonar belt, or None."""
+    tracker = estimation.intervals
+    if tracker.q_max >= sonar.count:
+        return (
             "q_max",
-            f"must be less than the number of sonars ({sonar.count}): with every reading allowed to be "
-            f"an outlier a scan constrains nothing; got {values['q_max']}",
+            f"must be less than the number of sonars ({sonar.count}): with every reading allowed "
+            f"to be an outlier a scan constrains nothing; got {tracker.q_max}",
         )
-    if values["free_space"] and sonar.lost_echo_prob > 0.0:
-        raise table.error(
+    if estimation.free_space and sonar.lost_echo_prob > 0.0:
+        return (
             "free_space",
             f"unsound: the sonar loses echoes (sensors.sonar.lost_echo_prob = {sonar.lost_echo_prob:g}), "
             "so a no-echo reading does not prove free space",
         )
-    ratio = sonar.rate_hz / values["interval_rate_hz"]
-    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
-        raise table.error(
+    ratio = sonar.rate_hz / estimation.interval_rate_hz
+    if ratio < 1.0 - RATE_RATIO_TOL or abs(ratio - round(ratio)) > RATE_RATIO_TOL:
+        return (
             "interval_rate_hz",
-            f"must divide the sonar rate ({sonar.rate_hz:g} Hz) a whole number of times, got {values['interval_rate_hz']:g}",
+            f"must divide the sonar rate ({sonar.rate_hz:g} Hz) a whole number of times, "
+            f"got {estimation.interval_rate_hz:g}",
         )
-    if values["imagesp_pitch_m"] < values["eps_m"]:
-        raise table.error(
-            "imagesp_pitch_m",
-            f"must be >= eps_m ({values['eps_m']:g}), got {values['imagesp_pitch_m']:g}",
-        )
-    return EstimationSpec(**values)
+    for name in ("v_max_m_s", "omega_max_rad_s"):
+        if getattr(tracker, name) != getattr(robot, name):
+            return (
+                name,
+                f"the tracker's {name} ({getattr(tracker, name):g}) must be the robot's "
+                f"({getattr(robot, name):g})",
+            )
+    return None
 
 
 # ---------------------------------------------------------------------------------------
@@ -539,69 +645,78 @@ def _take_angle(
     default: Any,
     *,
     shape: tuple[int | None, ...] | None = None,
-    **bounds: float,
+    bounds: Bounds | None = None,
 ) -> Any:
     """A ``*_rad*`` key (a number, or an array of ``shape``) that may instead be given in
     degrees under its ``*_deg*`` spelling, never both; returned in radians.
 
-    ``bounds`` (at 0 or symmetric about it, so the same in both units) apply to the number.
+    ``bounds`` (in radians) apply to the number, checked in the unit it is written in.
     """
     alias = _deg_alias(name)
     if table.has(name) and table.has(alias):
         raise table.error(alias, f"give {name} or {alias}, not both")
     key, scale = (alias, math.pi / 180.0) if table.has(alias) else (name, 1.0)
     if shape is None:
-        value = table.take_float(key, None, **bounds)
+        written = None if bounds is None else bounds.scaled(1.0 / scale)
+        value = table.take_float(key, None, bounds=written)
     else:
         value = table.take_array(key, shape, None)
     table.mention(alias if key == name else name)
     return default if value is None else value * scale
 
 
-#: Bounds implied by a parameter's name (MODELS.md section 1 naming rules).
-_NAME_BOUNDS: tuple[tuple[Callable[[str], bool], dict[str, float]], ...] = (
-    (lambda n: n.endswith("_prob"), {"minimum": 0.0, "maximum": 1.0}),
-    (
-        lambda n: any(word in n for word in ("_std", "density", "random_walk", "_bound")),
-        {"minimum": 0.0},
-    ),
-    (
-        lambda n: n.endswith("rate_hz") or n.startswith(("d_max", "v_max", "omega_max", "a_max")),
-        {"above": 0.0},
-    ),
-    (lambda n: "radius" in n or n.startswith(("wheel_base", "mass")), {"above": 0.0}),
-)
+#: A settings record read from one table: its defaults and the keys (fields) it takes there.
+Part = tuple[Any, tuple[str, ...]]
 
 
-def _bounds_for(field_name: str) -> dict[str, float]:
-    for matches, bounds in _NAME_BOUNDS:
-        if matches(field_name):
-            return bounds
-    return {}
+def _read_params(
+    table: Table,
+    defaults: Any,
+    skip: tuple[str, ...] = (),
+    parts: dict[str, Part] | None = None,
+) -> Any:
+    """A copy of the frozen settings record ``defaults`` with the table's keys replaced.
 
-
-def _read_params(table: Table, defaults: Any, skip: tuple[str, ...] = ()) -> Any:
-    """A copy of the frozen parameter record ``defaults`` with the table's keys replaced.
-
-    Each field is a key (radian fields also in degrees); its type is the type of the
-    default's value; missing keys keep the defaults. Errors the class raises in its own
-    validation are reported against the table.
+    Each field is a key (radian fields also in degrees) read by its annotated type: a
+    number within the bounds declared beside the field (``records.bounded``), a boolean, a
+    choice (a ``StrEnum``: one of its values) or an array; missing keys keep the defaults.
+    ``parts``: fields that are records themselves, each read from the same table with its
+    own keys (``[estimation]`` holds the tracker's and the filter's). Errors the records
+    raise in their own validation (checks across fields) are reported against the table.
     """
+    parts = parts or {}
+    values = _read_fields(table, defaults, skip=(*skip, *parts))
+    for name, (part_defaults, keys) in parts.items():
+        part_values = _read_fields(table, part_defaults, keys=keys)
+        values[name] = _replaced(table, part_defaults, part_values)
+    table.finish()
+    return _replaced(table, defaults, values)
+
+
+def _read_fields(
+    table: Table, defaults: Any, skip: tuple[str, ...] = (), keys: tuple[str, ...] | None = None
+) -> dict[str, Any]:
+    """The values the table gives for the fields of ``defaults`` (all but ``skip``, or
+    ``keys`` only), taken out of the table."""
+    hints = typing.get_type_hints(type(defaults))
     values: dict[str, Any] = {}
     for field in dataclasses.fields(defaults):
-        if not field.init or field.name in skip:
+        name = field.name
+        if not field.init or name in skip or (keys is not None and name not in keys):
             continue
-        name, current = field.name, getattr(defaults, field.name)
-        if isinstance(current, bool):
+        kind, bounds = _value_type(hints[name]), declared_bounds(defaults, name)
+        if kind is bool:
             value = table.take_bool(name, None)
-        elif isinstance(current, (int, np.integer)):
-            value = table.take_int(name, None, minimum=0)
-        elif isinstance(current, (float, np.floating)) and _is_radian(name):
-            value = _take_angle(table, name, None, **_bounds_for(name))
-        elif isinstance(current, (float, np.floating)):
-            value = table.take_float(name, None, **_bounds_for(name))
-        elif isinstance(current, np.ndarray):
-            shape = (None, *current.shape[1:])
+        elif kind is int:
+            value = table.take_int(name, None, bounds=bounds or Bounds(integer=True))
+        elif kind is float and _is_radian(name):
+            value = _take_angle(table, name, None, bounds=bounds)
+        elif kind is float:
+            value = table.take_float(name, None, bounds=bounds)
+        elif isinstance(kind, type) and issubclass(kind, Enum):
+            value = table.take_str(name, None, choices=choices(kind))
+        elif kind is np.ndarray:
+            shape = (None, *getattr(defaults, name).shape[1:])
             value = (
                 _take_angle(table, name, None, shape=shape)
                 if _is_radian(name)
@@ -611,15 +726,23 @@ def _read_params(table: Table, defaults: Any, skip: tuple[str, ...] = ()) -> Any
             continue
         if value is not None:
             values[name] = value
-    table.finish()
+    return values
+
+
+def _value_type(annotation: Any) -> Any:
+    """The type a field holds, without ``| None`` (``bool | None`` -> ``bool``)."""
+    if isinstance(annotation, types.UnionType):
+        kinds = [kind for kind in typing.get_args(annotation) if kind is not type(None)]
+        return kinds[0] if len(kinds) == 1 else annotation
+    return annotation
+
+
+def _replaced(table: Table, defaults: Any, values: dict[str, Any]) -> Any:
+    """``defaults`` with ``values`` replaced; a refusal of the record's own validation is
+    reported against the key its message names (longest match), else the table."""
     try:
         return dataclasses.replace(defaults, **values)
-    except (RobotsimError, ValueError, TypeError) as exc:
-        key = _blamed_key(str(exc), values)
-        raise ScenarioError(table.source, table.key(key) if key else table.path, str(exc)) from None
-
-
-def _blamed_key(message: str, values: dict[str, Any]) -> str | None:
-    """The key a parameter class's error message names (longest match), for the ``table.key``."""
-    named = [name for name in values if name in message]
-    return max(named, key=len) if named else None
+    except (ValueError, TypeError) as exc:
+        named = [name for name in values if name in str(exc)]
+        key = table.key(max(named, key=len)) if named else table.path
+        raise ScenarioError(table.source, key, str(exc)) from None

@@ -15,6 +15,7 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from scenarios.errors import ScenarioError
+from validated_records import Bounds
 
 #: Returned by ``take_*`` when a key is absent and has no default: the caller must decide.
 REQUIRED = object()
@@ -79,29 +80,44 @@ class Table:
         name: str,
         default: Any = REQUIRED,
         *,
+        bounds: Bounds | None = None,
         minimum: float | None = None,
         above: float | None = None,
         maximum: float | None = None,
         below: float | None = None,
     ) -> Any:
-        """A finite number (TOML integer or float) within the given bounds, as ``float``.
+        """A finite number (TOML integer or float) within ``bounds`` (a field's declared
+        :class:`records.Bounds`) or the given limits, as ``float``.
 
         ``minimum``/``maximum`` are inclusive bounds, ``above``/``below`` exclusive ones.
         """
         present, value = self._pop(name, default)
         if not present:
             return value
-        return _check_float(self, name, value, minimum, above, maximum, below)
+        if bounds is None:
+            bounds = Bounds(minimum=minimum, above=above, maximum=maximum, below=below)
+        return _check_float(self, name, value, bounds)
 
-    def take_int(self, name: str, default: Any = REQUIRED, *, minimum: int | None = None) -> Any:
-        """A TOML integer, at least ``minimum`` when given."""
+    def take_int(
+        self,
+        name: str,
+        default: Any = REQUIRED,
+        *,
+        bounds: Bounds | None = None,
+        minimum: int | None = None,
+    ) -> Any:
+        """A TOML integer within ``bounds`` (a field's declared :class:`records.Bounds`), or at
+        least ``minimum`` when given."""
         present, value = self._pop(name, default)
         if not present:
             return value
         if not isinstance(value, int) or isinstance(value, bool):
             raise self.error(name, f"must be an integer, got {_type_name(value)}")
-        if minimum is not None and value < minimum:
-            raise self.error(name, f"must be >= {minimum}, got {value}")
+        if bounds is None:
+            bounds = Bounds(minimum=minimum, integer=True)
+        reason = bounds.problem(value)
+        if reason is not None:
+            raise self.error(name, reason)
         return value
 
     def take_bool(self, name: str, default: Any = REQUIRED) -> Any:
@@ -166,28 +182,13 @@ def _type_name(value: object) -> str:
     }.get(type(value), type(value).__name__)
 
 
-def _check_float(
-    table: Table,
-    name: str,
-    value: object,
-    minimum: float | None,
-    above: float | None,
-    maximum: float | None,
-    below: float | None,
-) -> float:
+def _check_float(table: Table, name: str, value: object, bounds: Bounds) -> float:
     if not _is_number(value):
         raise table.error(name, f"must be a number, got {_type_name(value)}")
     number = float(value)
-    if not math.isfinite(number):
-        raise table.error(name, f"must be finite, got {number}")
-    if minimum is not None and number < minimum:
-        raise table.error(name, f"must be >= {minimum:g}, got {number:g}")
-    if above is not None and number <= above:
-        raise table.error(name, f"must be > {above:g}, got {number:g}")
-    if maximum is not None and number > maximum:
-        raise table.error(name, f"must be <= {maximum:g}, got {number:g}")
-    if below is not None and number >= below:
-        raise table.error(name, f"must be < {below:g}, got {number:g}")
+    reason = bounds.problem(number)
+    if reason is not None:
+        raise table.error(name, reason)
     return number
 
 

@@ -13,13 +13,13 @@ quantisation error never accumulates. Optional slip scales each sample's rotatio
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from robotsim.errors import RobotsimError
 from robotsim.robot import RobotParams, wrap_angle
+from validated_records import bounded, validate_fields
 
 
 @dataclass(frozen=True)
@@ -28,11 +28,10 @@ class EncoderParams:
     slip_std: relative standard deviation of a wheel's rotation per sample
         (dimensionless, 0 = no slip)."""
 
-    slip_std: float = 0.0
+    slip_std: float = bounded(0.0, minimum=0.0, maximum=1.0)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.slip_std) and self.slip_std >= 0):
-            raise RobotsimError(f"encoders: slip_std must be >= 0, got {self.slip_std}")
+        validate_fields(self, RobotsimError)
 
 
 def wheel_rotation_increments(pose, robot: RobotParams) -> np.ndarray:

@@ -12,20 +12,14 @@ The accelerometer's truth is the specific force in the plane: ``a_x = dv/dt``,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from robotsim.errors import RobotsimError
+from validated_records import bounded, validate_fields
 
 _G_M_S2 = 9.80665
-
-
-def _check_non_negative(params) -> None:
-    for field in fields(params):
-        value = getattr(params, field.name)
-        if not (math.isfinite(value) and value >= 0):
-            raise RobotsimError(f"{type(params).__name__} {field.name} must be >= 0, got {value}")
 
 
 @dataclass(frozen=True)
@@ -36,12 +30,12 @@ class GyroParams:
     bias_random_walk_rad_s_sqrt_s: bias random walk, rad/s/sqrt(s) (0.002 deg/s/sqrt(s)).
     """
 
-    noise_density_rad_s_sqrt_hz: float = math.radians(0.005)
-    turn_on_bias_std_rad_s: float = math.radians(0.1)
-    bias_random_walk_rad_s_sqrt_s: float = math.radians(0.002)
+    noise_density_rad_s_sqrt_hz: float = bounded(math.radians(0.005), minimum=0.0, maximum=1.0)
+    turn_on_bias_std_rad_s: float = bounded(math.radians(0.1), minimum=0.0, maximum=1.0)
+    bias_random_walk_rad_s_sqrt_s: float = bounded(math.radians(0.002), minimum=0.0, maximum=1.0)
 
     def __post_init__(self) -> None:
-        _check_non_negative(self)
+        validate_fields(self, RobotsimError)
 
 
 @dataclass(frozen=True)
@@ -52,12 +46,12 @@ class AccelerometerParams:
     bias_random_walk_m_s2_sqrt_s: bias random walk, m/s^2/sqrt(s) (0.05 milli-g/sqrt(s)).
     """
 
-    noise_density_m_s2_sqrt_hz: float = 400e-6 * _G_M_S2
-    turn_on_bias_std_m_s2: float = 20e-3 * _G_M_S2
-    bias_random_walk_m_s2_sqrt_s: float = 0.05e-3 * _G_M_S2
+    noise_density_m_s2_sqrt_hz: float = bounded(400e-6 * _G_M_S2, minimum=0.0, maximum=10.0)
+    turn_on_bias_std_m_s2: float = bounded(20e-3 * _G_M_S2, minimum=0.0, maximum=10.0)
+    bias_random_walk_m_s2_sqrt_s: float = bounded(0.05e-3 * _G_M_S2, minimum=0.0, maximum=1.0)
 
     def __post_init__(self) -> None:
-        _check_non_negative(self)
+        validate_fields(self, RobotsimError)
 
 
 def simulate_axes(

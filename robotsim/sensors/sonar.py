@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from robotsim.errors import RobotsimError
+from validated_records import bounded, validate_fields
 
 #: Relative slack of the inside-the-cone and on-the-segment tests: a point on a cone edge
 #: is kept by both the point test and the edge-ray test, so rounding cannot lose it.
@@ -147,6 +148,11 @@ def _read_only(values: Any, shape_name: str) -> np.ndarray:
     return array
 
 
+#: The most sensors of a default belt: real belts have 8 to 32; every interval epoch tests
+#: each box against each sensor, so the count multiplies its memory and time.
+MAX_BELT_COUNT = 64
+
+
 @dataclass(frozen=True, eq=False)
 class SonarBeltParams:
     """A belt of k sonars firing together at ``rate_hz``.
@@ -166,13 +172,13 @@ class SonarBeltParams:
 
     mount_xy: np.ndarray
     mount_angle_rad: np.ndarray
-    half_aperture_rad: float
-    d_max_m: float = 3.0
-    error_abs_bound_m: float = 0.02
-    error_rel_bound: float = 0.01
-    rate_hz: float = 1.0
-    outlier_prob: float = 0.0
-    lost_echo_prob: float = 0.0
+    half_aperture_rad: float = bounded(above=0.0, below=np.pi / 2)
+    d_max_m: float = bounded(3.0, above=0.0, maximum=100.0)
+    error_abs_bound_m: float = bounded(0.02, minimum=0.0, maximum=10.0)
+    error_rel_bound: float = bounded(0.01, minimum=0.0, below=1.0)
+    rate_hz: float = bounded(1.0, above=0.0, maximum=10_000.0)
+    outlier_prob: float = bounded(0.0, minimum=0.0, maximum=1.0)
+    lost_echo_prob: float = bounded(0.0, minimum=0.0, maximum=1.0)
 
     def __post_init__(self) -> None:
         mount_xy = _read_only(self.mount_xy, "mount_xy")
@@ -187,18 +193,7 @@ class SonarBeltParams:
             )
         object.__setattr__(self, "mount_xy", mount_xy)
         object.__setattr__(self, "mount_angle_rad", mount_angle)
-        checks = [
-            (0.0 < self.half_aperture_rad < np.pi / 2, "half_aperture_rad must be in (0, pi/2)"),
-            (0.0 < self.d_max_m < np.inf, "d_max_m must be positive and finite"),
-            (0.0 <= self.error_abs_bound_m < np.inf, "error_abs_bound_m must be >= 0"),
-            (0.0 <= self.error_rel_bound < 1.0, "error_rel_bound must be in [0, 1)"),
-            (0.0 < self.rate_hz < np.inf, "rate_hz must be positive"),
-            (0.0 <= self.outlier_prob <= 1.0, "outlier_prob must be in [0, 1]"),
-            (0.0 <= self.lost_echo_prob <= 1.0, "lost_echo_prob must be in [0, 1]"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise RobotsimError(f"sonar: {message}")
+        validate_fields(self, RobotsimError)
 
     @property
     def count(self) -> int:
@@ -216,9 +211,10 @@ class SonarBeltParams:
         """``count`` sensors evenly around the rim of a disk robot, the first one facing
         forward, each pointing radially outwards. ``settings`` are the other fields
         (``d_max_m``, error bounds, rate, fault probabilities)."""
-        if count < 1 or not robot_radius_m > 0:
+        if not (1 <= count <= MAX_BELT_COUNT) or not robot_radius_m > 0:
             raise RobotsimError(
-                f"sonar belt needs count >= 1 and robot_radius_m > 0, got {count}, {robot_radius_m}"
+                f"sonar belt needs 1 <= count <= {MAX_BELT_COUNT} and robot_radius_m > 0, "
+                f"got {count}, {robot_radius_m}"
             )
         angle = 2.0 * np.pi * np.arange(count) / count
         angle = np.where(angle >= np.pi, angle - 2.0 * np.pi, angle)  # wrap to [-pi, pi)

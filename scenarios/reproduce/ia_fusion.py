@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from intervals.tracker import Tracker
+from scenarios.commands import with_run_options
 from scenarios.outputs import atomic_directory, write_json, write_text
 from scenarios.runner import (
     FUSED,
@@ -49,7 +51,7 @@ from scenarios.spec import load_scenario
 
 HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP trackers on hall (table, figures 7-9)"
 
-TRACKERS = ("sivia", "imagesp")
+TRACKERS = tuple(Tracker)
 SCENARIO = "hall"
 
 #: Boxes are drawn at every this many epochs in the figures (all of them would hide the paths).
@@ -80,14 +82,12 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    spec = load_scenario(SCENARIO).with_run(seed=args.seed, duration_s=args.duration)
+    spec = with_run_options(load_scenario(SCENARIO), args.seed, args.duration)
     log = simulate_spec(spec)
     rows: dict[str, dict[str, Any]] = {}
     runs: dict[str, Estimation] = {}
     for tracker in TRACKERS:
-        variant = dataclasses.replace(
-            spec, estimation=dataclasses.replace(spec.estimation, tracker=tracker)
-        )
+        variant = dataclasses.replace(spec, estimation=spec.estimation.with_keys(tracker=tracker))
         estimation, _ = estimate(variant, log)
         runs[tracker] = estimation
         rows[tracker] = table_row(estimation_summary(log, estimation), estimation)
@@ -96,9 +96,7 @@ def main(args: argparse.Namespace) -> int:
         "scenario": spec.name,
         "seed": spec.run.seed,
         "duration_s": spec.run.duration_s,
-        "estimation": {
-            k: v for k, v in dataclasses.asdict(spec.estimation).items() if k != "tracker"
-        },
+        "estimation": {k: v for k, v in spec.estimation.as_keys().items() if k != "tracker"},
         "trackers": rows,
         "claims": claims,
     }

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from localization.gaussian import Gaussian
-from localization.models import MeasurementModel
+from localization.models import MeasurementModel, ProcessNoise
 from localization.motion_models import MODELS, MotionModel, gps_model
 from localization.sigma_points import ScaledSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
@@ -142,7 +142,9 @@ def run_filter(
     dt_s = 1.0 / meas.params.odometry_rate_hz
     ukf = UnscentedKalmanFilter(points=points)
     # the models' compiled kernels: the UKF's compiled path for the prediction and the GPS update
-    process = model.process_model(np.diag(model.process_noise_std(dt_s) ** 2), noise="augmented")
+    process = model.process_model(
+        np.diag(model.process_noise_std(dt_s) ** 2), noise=ProcessNoise.AUGMENTED
+    )
     gps = gps_model(meas.params.gps_noise_std_m**2 * np.eye(2))
     readings = {"speed": meas.speed_m_s, "yaw_rate": meas.yaw_rate_rad_s}  # (R, K) each
     noise_std = {

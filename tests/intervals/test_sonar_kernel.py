@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from intervals import sonar_kernel
+from intervals.engine import Engine
 from intervals.errors import IntervalError
 from intervals.interval import TRIG_EXACT_LIMIT_RAD
 from intervals.sivia import INSIDE, OUTSIDE
@@ -21,7 +22,6 @@ from intervals.sonar import (
     _ANGLE_MARGIN_RAD,
     _ARC_SLACK,
     ECHO,
-    ENGINES,
     FREE,
     GUARD_M,
     IGNORED,
@@ -189,9 +189,9 @@ def test_paving_and_tracking_agree_between_engines():
     rng = np.random.default_rng(33)
     trackers = {
         engine: IntervalTracker(TrackerSettings(0.5, 0.5, q_max=1, engine=engine), hall.bounds)
-        for engine in ENGINES
+        for engine in Engine
     }
-    previous = dict.fromkeys(ENGINES)
+    previous = dict.fromkeys(Engine)
     for truth in ([2.0, 6.0, 3.1], [5.0, 3.0, -3.1], [5.2, 3.1, -2.8]):
         truth = np.array(truth)
         readings = bounded_readings(cone_ranges(truth, hall.segments), PARAMS, rng)
@@ -199,17 +199,17 @@ def test_paving_and_tracking_agree_between_engines():
         scan = SonarScan(hall.segments, belt, readings, hall.boundary)
         prior = np.stack([truth - [0.4, 0.4, 0.2], truth + [0.4, 0.4, 0.2]], axis=-1)
         for inner in (False, True):
-            a, b = (gomne(scan, prior, 0.05, 2, inner=inner, engine=e) for e in ENGINES)
+            a, b = (gomne(scan, prior, 0.05, 2, inner=inner, engine=e) for e in Engine)
             assert a.q == b.q and a.q_set == b.q_set
             np.testing.assert_array_equal(a.paving.inner, b.paving.inner)
             np.testing.assert_array_equal(a.paving.boundary, b.paving.boundary)
             assert a.paving.contains(truth[None])[0]
-        a, b = (localize(scan, prior, 0.05, q=0, engine=e) for e in ENGINES)
+        a, b = (localize(scan, prior, 0.05, q=0, engine=e) for e in Engine)
         np.testing.assert_array_equal(a.outer, b.outer)
-        steps = {e: trackers[e].step(previous[e], scan, 1.0) for e in ENGINES}
+        steps = {e: trackers[e].step(previous[e], scan, 1.0) for e in Engine}
         assert steps["numpy"].status == steps["compiled"].status
         np.testing.assert_array_equal(steps["numpy"].outer, steps["compiled"].outer)
-        previous = {e: steps[e].paving for e in ENGINES}
+        previous = {e: steps[e].paving for e in Engine}
 
 
 def test_bad_engine_or_box_shape_is_refused():

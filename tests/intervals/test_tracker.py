@@ -1,13 +1,16 @@
 """The interval tracker on a synthetic circuit in ``hall``: containment, kidnapping, outliers,
 and what an epoch reports (boxes, inner mask, components, hull, status)."""
 
+import re
+
 import numpy as np
 import pytest
 
 from intervals.boxes import unwrap_headings
+from intervals.engine import Engine
 from intervals.errors import IntervalError
 from intervals.sonar import SonarBelt, SonarScan
-from intervals.tracker import IntervalTracker, TrackerSettings
+from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -121,9 +124,22 @@ def test_heading_unwrap_and_settings_errors():
     assert un[1, 2, 0] <= -3.1 + 2 * np.pi and un[1, 2, 1] >= -3.0 + 2 * np.pi
     assert np.allclose(un[1, 2], [-3.1 + 2 * np.pi, -3.0 + 2 * np.pi])
     np.testing.assert_array_equal(un[0], boxes[0])
-    for bad in ({"eps_m": 0.0}, {"tracker": "kalman"}, {"q_max": -1}, {"v_max_m_s": -1.0}):
+    for bad, reason in (
+        ({"eps_m": 0.0}, "eps_m must be >= 0.001, got 0"),
+        ({"tracker": "kalman"}, "tracker must be one of 'sivia', 'imagesp', got 'kalman'"),
+        ({"q_max": -1}, "q_max must be >= 0, got -1"),
+        ({"q_max": 1.0}, "q_max must be an integer"),
+        ({"v_max_m_s": -1.0}, "v_max_m_s must be >= 0"),
+        ({"engine": "fortran"}, "engine must be one of 'compiled', 'numpy'"),
+        ({"guaranteed": 1}, "guaranteed must be True or False"),
+        ({"ray_test": "auto"}, "ray_test must be True, False or None"),
+        ({"imagesp_pitch_m": 0.01}, "imagesp_pitch_m must be >= eps_m"),
+    ):
         kwargs = {"v_max_m_s": 0.5, "omega_max_rad_s": 0.5, **bad}
-        with pytest.raises(IntervalError, match="tracker settings"):
+        with pytest.raises(IntervalError, match=re.escape(f"TrackerSettings.{reason}")):
             TrackerSettings(**kwargs)
+    chosen = TrackerSettings(0.5, 0.5, tracker="imagesp", engine="numpy")
+    assert chosen.tracker is Tracker.IMAGESP and chosen.engine is Engine.NUMPY
+    assert TrackerSettings(0.5, 0.5).q_max == 1  # the scenario files' documented default
     with pytest.raises(IntervalError, match="map bounds"):
         IntervalTracker(TrackerSettings(0.5, 0.5), np.zeros((2, 2)))

@@ -338,7 +338,7 @@ def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
         NominalRobot(0.05, -0.3, 2048)
     with pytest.raises(EstimationError, match="filter must be one of"):
         DeadReckoningSettings(filter="kalman")
-    with pytest.raises(EstimationError, match="engine must be 'compiled' or 'generic'"):
+    with pytest.raises(EstimationError, match="engine must be one of 'compiled', 'generic'"):
         DeadReckoningSettings(engine="fast")
     runner = DeadReckoning(data_of(log), initial_belief(START, [0.01] * 3))
     runner.run(10)

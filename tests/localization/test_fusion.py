@@ -15,7 +15,7 @@ from scipy.stats import truncnorm
 
 from localization.errors import EstimationError
 from localization.fusion import (
-    FUSION_RULES,
+    FusionRule,
     clamp_heading,
     fuse,
     nearest_component,
@@ -227,7 +227,7 @@ def test_bad_fusion_inputs_are_refused(boxes, kwargs, message):
 
 def test_every_rule_keeps_the_fused_position_in_the_box():
     rng = np.random.default_rng(6)
-    for rule in FUSION_RULES:
+    for rule in FusionRule:
         for _ in range(20):
             box = random_boxes(rng, 1)
             point = rng.uniform(-8, 8, (3, 2))

@@ -219,3 +219,20 @@ def test_the_same_file_for_recording_and_summary_is_refused(tmp_path):
     assert done.returncode == 2
     assert done.stderr == "robotsim: error: --summary: same file as --rrd\n"
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "reason"),
+    [
+        ("--seed", "-1", "must be >= 0, got -1"),
+        ("--duration", "nan", "must be finite, got nan"),
+        ("--duration", "1e300", "more than the 1e+07 a run may have"),
+    ],
+)
+def test_a_bad_override_is_blamed_on_its_option(tmp_path, option, value, reason):
+    """The spec checks the values against ``[run]``'s bounds; the command names its option."""
+    done = robotsim("run", option, value, cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"robotsim: error: {option}: ") and done.stderr.count("\n") == 1
+    assert reason in done.stderr
+    assert not any(tmp_path.iterdir())

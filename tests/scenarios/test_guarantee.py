@@ -27,7 +27,7 @@ SHORT_S = 15.0
 
 
 def with_estimation(spec, **changes):
-    return dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, **changes))
+    return spec.with_estimation(**changes)
 
 
 def with_outliers(log, per_scan: int, rng: np.random.Generator, scans=None):
@@ -81,7 +81,7 @@ def test_bounded_errors_and_at_most_q_outliers_keep_the_truth_in_the_set(name, s
     # seeds 2 and 3 add the ray test (intervals.rays) to the box test, at q_max 1 and 2
     spec = with_estimation(spec, q_max=1 + seed % 2, ray_test=seed in (2, 3))
     log = simulate_spec(spec)
-    bad = with_outliers(log, spec.estimation.q_max, np.random.default_rng(seed))
+    bad = with_outliers(log, spec.estimation.intervals.q_max, np.random.default_rng(seed))
     estimation, _ = estimate(spec, bad)
     check_sound(estimation)
     assert estimation_summary(bad, estimation)["containment"] == 1.0
@@ -92,9 +92,9 @@ def test_bounded_errors_and_at_most_q_outliers_keep_the_truth_in_the_set(name, s
 @pytest.mark.parametrize("tracker", ["sivia", "imagesp"])
 def test_lost_echoes_without_free_space_stay_sound(tracker):
     spec = load_scenario("hall").with_run(seed=5, duration_s=10.0)
+    spec = with_estimation(spec, tracker=tracker, free_space=False, q_max=0)
     sonar = dataclasses.replace(spec.sensors.sonar, lost_echo_prob=0.1)
     spec = dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, sonar=sonar))
-    spec = with_estimation(spec, tracker=tracker, free_space=False, q_max=0)
     log = simulate_spec(spec)
     assert log.sonar_fault.any()  # echoes were lost; as no-echo readings they are ignored
     estimation, _ = estimate(spec, log)
@@ -142,7 +142,7 @@ def test_many_random_outliers_never_crash_nor_clamp_to_nothing():
     assert (epochs.status == INCONSISTENT).any()  # some were detected
     # a set that lost the truth can only come after a scan with more than q_max outliers
     # (the guarantee's hypothesis broken there or at an earlier epoch of the same track)
-    first_excess = np.argmax(log.sonar_fault.sum(axis=1) > spec.estimation.q_max)
+    first_excess = np.argmax(log.sonar_fault.sum(axis=1) > spec.estimation.intervals.q_max)
     assert np.all(epochs.contains_truth[:first_excess])
 
 
@@ -243,9 +243,10 @@ def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
     assert "containment 0.96" in failure and spec.source in failure
     assert guarantee_failure(spec, {"containment": 1.0}) is None
     assert guarantee_failure(spec, {"containment": None}) is None  # no set at all: nothing to judge
+    without_free_space = spec.with_estimation(free_space=False)  # unsound with lost echoes
     for fault in ("outlier_prob", "lost_echo_prob"):
         faulty = dataclasses.replace(
-            spec,
+            without_free_space,
             sensors=dataclasses.replace(
                 spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})
             ),

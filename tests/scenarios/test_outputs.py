@@ -27,10 +27,9 @@ def test_atomic_paths_rolls_back_the_files_moved_when_a_later_move_fails(tmp_pat
     new = tmp_path / "new.json"
     taken = tmp_path / "taken"  # a folder: the last move fails
     taken.mkdir()
-    with pytest.raises(OSError) as failure:
-        with outputs.atomic_paths(kept, new, taken) as temporaries:
-            for tmp, text in zip(temporaries, ("new recording", "summary", "third")):
-                tmp.write_text(text)
+    with pytest.raises(OSError) as failure, outputs.atomic_paths(kept, new, taken) as temporaries:
+        for tmp, text in zip(temporaries, ("new recording", "summary", "third")):
+            tmp.write_text(text)
     assert str(taken) in str(failure.value)
     assert kept.read_text() == "previous recording"  # restored
     assert not new.exists()  # removed: there was no file before
@@ -52,17 +51,15 @@ def test_atomic_paths_moves_every_file_once_the_block_succeeds(tmp_path):
 def test_an_error_in_the_block_touches_no_destination(tmp_path):
     first, second = tmp_path / "one.txt", tmp_path / "two.txt"
     second.write_text("old")
-    with pytest.raises(RuntimeError):
-        with outputs.atomic_paths(first, second) as (tmp_first, tmp_second):
-            tmp_first.write_text("1")
-            raise RuntimeError("crash")
+    with pytest.raises(RuntimeError), outputs.atomic_paths(first, second) as (tmp_first, tmp_second):
+        tmp_first.write_text("1")
+        raise RuntimeError("crash")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["two.txt"] and second.read_text() == "old"
 
 
 def test_the_same_destination_twice_is_refused(tmp_path):
-    with pytest.raises(ValueError, match="twice"):
-        with outputs.atomic_paths(tmp_path / "x", tmp_path / "." / "x"):
-            pass
+    with pytest.raises(ValueError, match="twice"), outputs.atomic_paths(tmp_path / "x", tmp_path / "." / "x"):
+        pass
     assert not any(tmp_path.iterdir())
 
 

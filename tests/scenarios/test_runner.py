@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from intervals.errors import IntervalError
 from scenarios.errors import ScenarioError
 from scenarios.metrics import summarize
 from scenarios.runner import BRANCHES, run_scenario, simulate_spec
@@ -128,13 +129,18 @@ def test_the_ukf_only_branch_never_sees_the_boxes(hall_runs):
 
 
 def test_an_interval_error_at_run_time_is_reported_against_the_estimation_table():
-    """Settings the spec cannot catch (here built by hand past its validation) fail with the
-    scenario's file and the ``estimation`` key, not an unlocated interval message."""
+    """Settings the spec cannot catch (here forced into the frozen record past its
+    validation, which refuses them when built) fail with the scenario's file and the
+    ``estimation`` key, not an unlocated interval message."""
     spec = load_scenario("hall").with_run(duration_s=1.0)
+    with pytest.raises(IntervalError, match="heading_scale_m_per_rad"):
+        spec.with_estimation(heading_scale_m_per_rad=np.inf)
+    forced = dataclasses.replace(spec.estimation.intervals)
+    object.__setattr__(forced, "heading_scale_m_per_rad", np.inf)
     broken = dataclasses.replace(
-        spec, estimation=dataclasses.replace(spec.estimation, heading_scale_m_per_rad=np.inf)
+        spec, estimation=dataclasses.replace(spec.estimation, intervals=forced)
     )
     with pytest.raises(ScenarioError) as refusal:
         run_scenario(broken)
     assert refusal.value.source == spec.source and refusal.value.key == "estimation"
-    assert "heading_scale_m_per_rad" in refusal.value.reason
+    assert "scale must be 3 positive finite numbers" in refusal.value.reason

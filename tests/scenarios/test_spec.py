@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from intervals.tracker import TrackerSettings
 from robotsim.control import Route, ScriptedProfile
 from robotsim.maps import BUILTIN_MAP_NAMES
 from robotsim.robot import RobotParams
@@ -70,7 +71,7 @@ def test_values_units_and_degree_keys():
         + """
 start_heading_deg = 90
 v_max_m_s = 0.8
-wheel_radius_m = 0.06
+wheel_radius_m = 0.052
 omega_max_deg_s = 90
 [run]
 dt_s = 0.02
@@ -91,7 +92,7 @@ loop = false
         and spec.run.seed == 7
     )
     assert spec.start_pose[2] == pytest.approx(math.pi / 2)
-    assert spec.robot.wheel_radius_m == 0.06  # "radius" is not a radian key
+    assert spec.robot.wheel_radius_m == 0.052  # "radius" is not a radian key
     assert spec.robot.v_max_m_s == 0.8 and spec.robot.omega_max_rad_s == pytest.approx(math.pi / 2)
     assert spec.sensors.sonar.half_aperture_rad == pytest.approx(math.radians(10))
     assert spec.sensors.sonar.d_max_m == 2.5
@@ -148,7 +149,9 @@ BAD = {
     "unknown key": ("[run]\ndurration_s = 5\n", "run.durration_s", "did you mean 'duration_s'"),
     "unknown table": ("[sensor.sonar]\nd_max_m = 3\n", "sensor", "unknown key"),
     "unknown sensor key": ("[sensors.gyro]\nbias = 1.0\n", "sensors.gyro.bias", "unknown key"),
-    "negative rate": ("[run]\nrate_hz = -100\n", "run.rate_hz", "must be > 0"),
+    "negative rate": ("[run]\nrate_hz = -100\n", "run.rate_hz", "must be >= 1"),
+    "rate beyond the simulator's": ("[run]\nrate_hz = 1e9\n", "run.rate_hz", "must be <= 10000"),
+    "period below the simulator's": ("[run]\ndt_s = 1e-9\n", "run.dt_s", "must be >= 0.0001"),
     "negative sonar rate": (
         "[sensors.sonar]\nrate_hz = -1\n",
         "sensors.sonar.rate_hz",
@@ -199,8 +202,16 @@ BAD = {
         "estimation.q_max",
         "constrains nothing",
     ),
-    "too many samples (rate)": ("[run]\nrate_hz = 1e9\n", "run.rate_hz", "more than the 1e+07"),
-    "too many samples (dt)": ("[run]\ndt_s = 1e-9\n", "run.dt_s", "more than the 1e+07"),
+    "too many samples (rate)": (
+        "[run]\nrate_hz = 1e4\nduration_s = 1e4\n",
+        "run.rate_hz",
+        "more than the 1e+07",
+    ),
+    "too many samples (dt)": (
+        "[run]\ndt_s = 1e-4\nduration_s = 1e4\n",
+        "run.dt_s",
+        "more than the 1e+07",
+    ),
     "too many samples (duration)": (
         "[run]\nduration_s = 1e300\n",
         "run.duration_s",
@@ -283,7 +294,9 @@ def _merge(base: str, extra: str) -> str:
 
 def test_estimation_defaults_and_values():
     spec = parse(BASE)
-    assert spec.estimation == EstimationSpec(free_space=True)
+    limits = TrackerSettings(spec.robot.v_max_m_s, spec.robot.omega_max_rad_s)
+    assert spec.estimation == EstimationSpec(intervals=limits, free_space=True)
+    assert spec.estimation.intervals.q_max == 1  # the documented default, the tracker's own
     assert spec.estimation.scan_stride(spec.sensors.sonar.rate_hz) == 1
     lossy = parse(BASE + "[sensors.sonar]\nlost_echo_prob = 0.1\nrate_hz = 2.0\n")
     assert lossy.estimation.free_space is False and lossy.estimation.interval_rate_hz == 2.0
@@ -293,15 +306,23 @@ def test_estimation_defaults_and_values():
         "free_space = false\nray_test = true\n"
     )
     est = parse(BASE + text).estimation
-    assert (est.filter, est.tracker, est.fusion, est.eps_m, est.q_max) == (
+    tracker = est.intervals
+    assert (
+        est.dead_reckoning.filter,
+        tracker.tracker,
+        est.fusion,
+        tracker.eps_m,
+        tracker.q_max,
+    ) == (
         "iekf",
         "imagesp",
         "clamp_heading",
         0.1,
         3,
     )
-    assert est.scan_stride(4.0) == 4 and est.free_space is False and est.guaranteed is False
-    assert est.ray_test is True and spec.estimation.ray_test is None  # absent: by the aperture
+    assert est.scan_stride(4.0) == 4 and est.free_space is False and tracker.guaranteed is False
+    assert tracker.ray_test is True and spec.estimation.intervals.ray_test is None  # by aperture
+    assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
 
 def test_empty_map_is_refused():
@@ -347,16 +368,18 @@ def test_invalid_toml_names_the_line():
     assert "not valid TOML" in error.reason and "line 1" in error.reason
 
 
-def test_command_line_overrides_are_checked():
+def test_run_overrides_are_checked_against_the_run_bounds():
     spec = parse(BASE)
     assert spec.with_run(seed=3, duration_s=2.5).run.seed == 3
-    with pytest.raises(ScenarioError, match="--duration"):
-        spec.with_run(duration_s=float("nan"))
-    with pytest.raises(ScenarioError, match="--seed"):
-        spec.with_run(seed=-1)
-    for duration_s, reason in ((1e-9, "shorter than one sample"), (1e300, "more than the 1e+07")):
-        with pytest.raises(ScenarioError, match="--duration") as refusal:
-            spec.with_run(duration_s=duration_s)
+    for changes, key, reason in (
+        ({"duration_s": float("nan")}, "run.duration_s", "must be finite"),
+        ({"seed": -1}, "run.seed", "must be >= 0, got -1"),
+        ({"duration_s": 1e-9}, "run.duration_s", "shorter than one sample"),
+        ({"duration_s": 1e300}, "run.duration_s", "more than the 1e+07"),
+    ):
+        with pytest.raises(ScenarioError) as refusal:
+            spec.with_run(**changes)
+        assert (refusal.value.source, refusal.value.key) == (None, key)
         assert reason in refusal.value.reason
 
 
@@ -368,7 +391,8 @@ def test_the_sample_limit_and_the_sonar_beat_admit_the_edges():
     assert (
         parse(BASE + "[sensors.sonar]\nrate_hz = 4\n").sensors.sonar.rate_hz == 4.0
     )  # 25 samples a scan
-    assert parse(BASE + "[estimation]\nq_max = 15\neps_m = 1e-3\n").estimation.q_max == 15
+    edge = parse(BASE + "[estimation]\nq_max = 15\neps_m = 1e-3\n").estimation.intervals
+    assert edge.q_max == 15 and edge.eps_m == 1e-3
 
 
 @pytest.mark.parametrize(
