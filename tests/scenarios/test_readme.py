@@ -122,7 +122,7 @@ def test_the_readme_is_short_and_keeps_the_commands_ci_runs():
     # .ci/run installs and tests exactly as these blocks say
     assert "```sh\npip install .\nrobotsim run\n```" in text
     assert '```sh\npip install ".[test]"\npytest\n```' in text
-    assert 'pip install ".[dev]"' in text and "pre-commit install" in text
+    assert 'pip install -e ".[dev]"' in text and "pre-commit install" in text
 
 
 def _anchor(heading: str) -> str:
