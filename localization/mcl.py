@@ -406,15 +406,9 @@ class MonteCarloLocalization:
         self._weights = scaled / total
         # average likelihood sum_i w_prior_i p_i (PR table 8.3, line 8), w_slow/w_fast (line 10)
         w_avg = math.exp(top) * total
-        if s.recovery:
-            if self.w_slow == 0.0:
-                self.w_slow = w_avg
-            else:
-                self.w_slow += s.recovery_alpha_slow * (w_avg - self.w_slow)
-            if self.w_fast == 0.0:
-                self.w_fast = w_avg
-            else:
-                self.w_fast += s.recovery_alpha_fast * (w_avg - self.w_fast)
+        if s.recovery:  # from 0, as PR table 8.3 and pf.c: no injection until w_slow grows
+            self.w_slow += s.recovery_alpha_slow * (w_avg - self.w_slow)
+            self.w_fast += s.recovery_alpha_fast * (w_avg - self.w_fast)
 
     @property
     def random_share(self) -> float:

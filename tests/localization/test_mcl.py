@@ -340,11 +340,10 @@ def test_recovery_averages_and_random_share_follow_their_recursions():
         alpha4=0.0,
         recovery_alpha_slow=0.05,
         recovery_alpha_fast=0.5,
-        min_particles=50,
-        max_particles=200,
+        min_particles=1000,
+        max_particles=1000,
     )
-    mcl = _filter(settings, _constant_ranges([1.0, 2.0]))
-    mcl.set_particles(_random_poses(HALL, 200, np.random.default_rng(10)))
+    home = np.array([4.0, 3.0, 0.5])
     good, bad = np.array([1.0, 2.0]), np.array([2.5, 0.4])
     p_good = math.prod(
         _direct_beam(z, e, settings, 3.0) for z, e in zip(good, [1.0, 2.0], strict=True)
@@ -352,23 +351,40 @@ def test_recovery_averages_and_random_share_follow_their_recursions():
     p_bad = math.prod(
         _direct_beam(z, e, settings, 3.0) for z, e in zip(bad, [1.0, 2.0], strict=True)
     )
-    mcl.update(np.zeros(3), good)
-    assert mcl.w_slow == pytest.approx(p_good) and mcl.w_fast == pytest.approx(p_good)
-    assert mcl.random_share == 0.0
-    mcl.update(np.array([1.0, 0.0, 0.0]), bad)
-    w_slow = p_good + 0.05 * (p_bad - p_good)
-    w_fast = p_good + 0.5 * (p_bad - p_good)
-    # the injection that followed restarted both averages (pf.c); the share it used:
-    assert mcl.w_slow == 0.0 and mcl.w_fast == 0.0
+    scans = [good] * 40 + [bad]
+    # PR table 8.3: w_slow += a_slow (w_avg - w_slow), w_fast likewise, both from 0
+    w_slow = w_fast = 0.0
+    for scan in scans:
+        w_avg = p_good if scan is good else p_bad
+        w_slow += 0.05 * (w_avg - w_slow)
+        w_fast += 0.5 * (w_avg - w_fast)
     share = 1 - w_fast / w_slow
-    assert 0.3 < share < 0.5
-    # the same two scans without resampling show the averages themselves
-    kept = _filter(dataclasses.replace(settings, resample_interval=5), _constant_ranges([1, 2]))
-    kept.set_particles(_random_poses(HALL, 200, np.random.default_rng(10)))
-    kept.update(np.zeros(3), good)
-    kept.update(np.array([1.0, 0.0, 0.0]), bad)
-    assert kept.w_slow == pytest.approx(w_slow) and kept.w_fast == pytest.approx(w_fast)
-    assert kept.random_share == pytest.approx(share)
+    assert 0.3 < share < 0.9
+
+    def run(resample_interval):
+        mcl = _filter(
+            dataclasses.replace(settings, resample_interval=resample_interval),
+            _constant_ranges([1.0, 2.0]),
+        )
+        mcl.set_particles(np.tile(home, (1000, 1)))
+        for step, scan in enumerate(scans):
+            assert mcl.update(np.array([0.3 * step, 0.0, 0.0]), scan)
+            if step < len(scans) - 1:
+                assert mcl.random_share == 0.0  # w_fast rises ahead of w_slow: no injection
+        return mcl
+
+    kept = run(resample_interval=100)  # no resampling: the averages as they stand
+    assert kept.w_slow == pytest.approx(w_slow, rel=1e-9)
+    assert kept.w_fast == pytest.approx(w_fast, rel=1e-9)
+    assert kept.random_share == pytest.approx(share, rel=1e-9)
+    resampled = run(resample_interval=1)  # the last resampling injected random particles
+    assert resampled.w_slow == 0.0 and resampled.w_fast == 0.0  # restarted, as pf.c
+    # the particles that followed the odometry from `home` (straight along their heading) all
+    # sit at one pose; the others are the uniform draws, binomial(1000, share) of them
+    travel = 0.3 * (len(scans) - 1)
+    moved_home = home + travel * np.array([math.cos(home[2]), math.sin(home[2]), 0.0])
+    random = ~np.all(np.isclose(resampled.particles, moved_home), axis=1)
+    assert abs(random.sum() - 1000 * share) < 5 * math.sqrt(1000 * share * (1 - share))
 
 
 def test_update_waits_for_update_min_d_or_update_min_a():
