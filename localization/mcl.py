@@ -41,6 +41,11 @@ prior-weighted mean likelihood (``amcl`` divides by the particle count, which th
 with KLD-sampling); the KLD loop draws from a systematic resample in random order and then
 the new set is a systematic resample of the size found (``amcl`` draws multinomially); a
 histogram with one occupied bin asks for ``min_particles`` (``amcl``: ``max_particles``).
+``w_slow`` and ``w_fast`` run on after an injection of random particles, as PR table 8.3
+(``pf.c`` sets both to 0 after each injection: they then restart from 0 and, with
+``recovery_alpha_slow = 0.001``, ``w_fast`` stays above ``w_slow`` for a long time; on hall,
+seed 0, the robot kidnapped at 100 s, that variant had not found the robot 100 s later,
+this one had after 18 s).
 The estimate is the weighted mean of all particles (``amcl`` reports its heaviest cluster).
 """
 
@@ -440,7 +445,6 @@ class MonteCarloLocalization:
         new = self._particles[kept]
         if n_random:
             new = np.concatenate([new, self.uniform_poses(n_random)])
-            self.w_slow = self.w_fast = 0.0  # as pf.c: restart the averages after an injection
         self._particles = np.ascontiguousarray(new)
         self._weights = np.full(count, 1.0 / count)
 
