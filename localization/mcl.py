@@ -406,6 +406,11 @@ class MonteCarloLocalization:
         with np.errstate(divide="ignore"):
             log_w = np.log(self._weights) + log_p  # log(w_prior p); w_prior 0 gives -inf
         top = np.max(log_w)
+        if not np.isfinite(top):
+            raise EstimationError(
+                "MonteCarloLocalization.update: the scan has likelihood 0 (or NaN) at every "
+                "particle; with z_rand > 0 every reading has a positive likelihood"
+            )
         scaled = np.exp(log_w - top)
         total = scaled.sum()
         self._weights = scaled / total

@@ -239,8 +239,13 @@ def test_motion_samples_have_the_model_mean_and_covariance():
         ]
     )
     heading = start[2] + rot1
-    mean = [start[0] + trans * math.cos(heading), start[1] + trans * math.sin(heading)]
-    mean = np.array([*mean, start[2] + rot1 + rot2])
+    mean = np.array(
+        [
+            start[0] + trans * math.cos(heading),
+            start[1] + trans * math.sin(heading),
+            start[2] + rot1 + rot2,
+        ]
+    )
     jac = np.array(
         [
             [-trans * math.sin(heading), math.cos(heading), 0.0],
@@ -457,6 +462,14 @@ def test_pose_between_updates_carries_the_estimate_by_the_odometry():
     got = mcl.pose_at(later)
     np.testing.assert_allclose(got[:2], want[:2, 2], atol=1e-12)
     assert got[2] == pytest.approx(math.atan2(want[1, 0], want[0, 0]))
+
+
+def test_a_scan_no_particle_can_explain_is_refused():
+    settings = MclSettings(z_short=0.0, z_max=0.0, z_rand=0.0, sigma_hit_m=0.01)
+    mcl = _filter(settings, _constant_ranges([1.0]))
+    mcl.set_particles(np.zeros((5, 3)))
+    with pytest.raises(EstimationError, match="likelihood 0"):
+        mcl.update(np.zeros(3), [2.9])
 
 
 def test_settings_are_validated():
