@@ -84,21 +84,29 @@ def test_cone_ranges_give_the_noiseless_sonar_reading():
     np.testing.assert_allclose(np.where(in_range, expected, np.inf), readings, rtol=1e-12, atol=0.0)
 
 
-def test_free_space_samples_keep_the_robot_off_the_walls_and_are_uniform():
-    sample = free_space_sampler(HALL, robot_radius_m=0.2)
-    xy = sample(np.random.default_rng(4), 20000)
+@pytest.mark.parametrize("name", ["hall", "office", "symmetric"])
+def test_free_space_samples_keep_the_robot_off_the_walls_and_inside(name):
+    segment_map = builtin_map(name)
+    xy = free_space_sampler(segment_map, robot_radius_m=0.2)(np.random.default_rng(4), 20000)
     assert xy.shape == (20000, 2)
     gap = np.min(
-        [point_segment_distance(xy, s[0], s[1]) for s in HALL.segments], axis=0
+        [point_segment_distance(xy, s[0], s[1]) for s in segment_map.segments], axis=0
     )  # (P,) distance to the nearest wall
     assert gap.min() >= 0.2 - 1e-3  # shapely's buffer is a polygon: within its tolerance
-    inside = (xy > 0.2 - 1e-9) & (xy < np.array([10.0, 8.0]) - 0.2 + 1e-9)
-    assert inside.all()
-    # uniform: the share west of x = 5 m is that of the free area there
+    upper = segment_map.bounds[:, 1] - 0.2 + 1e-9
+    assert np.all((xy > 0.2 - 1e-9) & (xy < upper))  # the outer walls start at (0, 0)
+
+
+def test_free_space_samples_are_uniform():
+    xy = free_space_sampler(HALL, robot_radius_m=0.2)(np.random.default_rng(5), 20000)
     space = free_space(HALL, 0.2)
-    west = space.intersection(box(-1, -1, 5, 9)).area / space.area
-    share = np.mean(xy[:, 0] < 5.0)
-    assert abs(share - west) < 4 * math.sqrt(west * (1 - west) / len(xy))
+    # the share in each quarter of the hall is that of the free area there
+    for x0, y0 in ((0, 0), (5, 0), (0, 4), (5, 4)):
+        area = space.intersection(box(x0, y0, x0 + 5, y0 + 4)).area / space.area
+        share = np.mean(
+            (xy[:, 0] >= x0) & (xy[:, 0] < x0 + 5) & (xy[:, 1] >= y0) & (xy[:, 1] < y0 + 4)
+        )
+        assert abs(share - area) < 4 * math.sqrt(area * (1 - area) / len(xy))
 
 
 # -- beam model ---------------------------------------------------------------------------
