@@ -53,14 +53,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
 
-from localization import mcl_kernels as kernels
+from localization import mcl_kernels
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
+from validated_records import bounded, validate_fields
 
 ExpectedRanges = Callable[[np.ndarray], np.ndarray]
 """``particles (N, 3) -> (N, S)`` expected ranges in metres (``inf``: no echo)."""
@@ -79,8 +80,8 @@ class BeamCombination(StrEnum):
 
 
 _COMBINATION_CODE = {
-    BeamCombination.PRODUCT: kernels.COMBINE_PRODUCT,
-    BeamCombination.AMCL_CUBE: kernels.COMBINE_AMCL_CUBE,
+    BeamCombination.PRODUCT: mcl_kernels.COMBINE_PRODUCT,
+    BeamCombination.AMCL_CUBE: mcl_kernels.COMBINE_AMCL_CUBE,
 }
 
 
@@ -112,68 +113,42 @@ class MclSettings:
         resample_interval: filter updates between resamplings (>= 1).
     """
 
-    alpha1: float = 0.2
-    alpha2: float = 0.2
-    alpha3: float = 0.2
-    alpha4: float = 0.2
-    z_hit: float = 0.5
-    z_short: float = 0.05
-    z_max: float = 0.05
-    z_rand: float = 0.5
-    sigma_hit_m: float = 0.2
-    lambda_short_per_m: float = 0.1
+    alpha1: float = bounded(0.2, minimum=0.0, maximum=100.0)
+    alpha2: float = bounded(0.2, minimum=0.0, maximum=100.0)
+    alpha3: float = bounded(0.2, minimum=0.0, maximum=100.0)
+    alpha4: float = bounded(0.2, minimum=0.0, maximum=100.0)
+    z_hit: float = bounded(0.5, minimum=0.0, maximum=1e6)
+    z_short: float = bounded(0.05, minimum=0.0, maximum=1e6)
+    z_max: float = bounded(0.05, minimum=0.0, maximum=1e6)
+    z_rand: float = bounded(0.5, minimum=0.0, maximum=1e6)
+    sigma_hit_m: float = bounded(0.2, above=0.0, maximum=100.0)
+    lambda_short_per_m: float = bounded(0.1, above=0.0, maximum=1e6)
     beam_combination: BeamCombination = BeamCombination.PRODUCT
-    min_particles: int = 500
-    max_particles: int = 2000
-    kld_err: float = 0.05
-    kld_z: float = 0.99
-    kld_bin_xy_m: float = 0.5
-    kld_bin_theta_rad: float = math.radians(10.0)
-    recovery_alpha_slow: float = 0.0
-    recovery_alpha_fast: float = 0.0
-    update_min_d_m: float = 0.25
-    update_min_a_rad: float = 0.2
-    resample_interval: int = 1
+    min_particles: int = bounded(500, minimum=1, maximum=10_000_000, integer=True)
+    max_particles: int = bounded(2000, minimum=1, maximum=10_000_000, integer=True)
+    kld_err: float = bounded(0.05, above=0.0, maximum=1.0)
+    kld_z: float = bounded(0.99, minimum=0.0, maximum=10.0)
+    kld_bin_xy_m: float = bounded(0.5, above=0.0, maximum=1e3)
+    kld_bin_theta_rad: float = bounded(math.radians(10.0), above=0.0, maximum=2 * math.pi)
+    recovery_alpha_slow: float = bounded(0.0, minimum=0.0, maximum=1.0)
+    recovery_alpha_fast: float = bounded(0.0, minimum=0.0, maximum=1.0)
+    update_min_d_m: float = bounded(0.25, minimum=0.0, maximum=1e3)
+    update_min_a_rad: float = bounded(0.2, minimum=0.0, maximum=2 * math.pi)
+    resample_interval: int = bounded(1, minimum=1, maximum=1_000_000, integer=True)
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "beam_combination", BeamCombination(self.beam_combination))
-        except ValueError:
-            choices = ", ".join(repr(c.value) for c in BeamCombination)
-            raise EstimationError(
-                f"MclSettings: beam_combination must be one of {choices}, got "
-                f"{self.beam_combination!r}"
-            ) from None
-        for field in fields(self):
-            value = getattr(self, field.name)
-            if field.name == "beam_combination":
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise EstimationError(f"MclSettings: {field.name} must be a number, got {value!r}")
-            if not math.isfinite(value) or value < 0:
-                raise EstimationError(
-                    f"MclSettings: {field.name} must be finite and >= 0, got {value!r}"
-                )
+        validate_fields(self, EstimationError)
         checks = [
             (self.z_hit + self.z_short + self.z_max + self.z_rand > 0, "z_* must not all be 0"),
-            (self.sigma_hit_m > 0, "sigma_hit_m must be > 0"),
-            (self.lambda_short_per_m > 0, "lambda_short_per_m must be > 0"),
-            (
-                all(int(getattr(self, n)) == getattr(self, n) for n in _INTEGER_FIELDS),
-                f"{', '.join(_INTEGER_FIELDS)} must be integers",
-            ),
             (
                 1 <= self.min_particles <= self.max_particles,
                 "need 1 <= min_particles <= max_particles",
             ),
-            (self.kld_err > 0, "kld_err must be > 0"),
-            (self.kld_bin_xy_m > 0 and self.kld_bin_theta_rad > 0, "kld_bin_* must be > 0"),
             (
                 (self.recovery_alpha_slow == self.recovery_alpha_fast == 0.0)
                 or (0 < self.recovery_alpha_slow < self.recovery_alpha_fast <= 1),
                 "need 0 < recovery_alpha_slow < recovery_alpha_fast <= 1, or both 0",
             ),
-            (self.resample_interval >= 1, "resample_interval must be >= 1"),
         ]
         for ok, message in checks:
             if not ok:
@@ -202,9 +177,6 @@ class MclSettings:
     def recovery(self) -> bool:
         """Whether random particles are injected (the recovery rates are set)."""
         return self.recovery_alpha_fast > 0
-
-
-_INTEGER_FIELDS = ("min_particles", "max_particles", "resample_interval")
 
 
 @dataclass(frozen=True)
@@ -379,7 +351,7 @@ class MonteCarloLocalization:
             if not moved:
                 return False
             normals = self._rng.standard_normal((len(self._particles), 3))
-            self._particles = kernels.sample_motion_odometry(
+            self._particles = mcl_kernels.sample_motion_odometry(
                 self._particles, self._odom_at_update, odom, s.alphas, normals
             )
         self._odom_at_update = odom.copy()
@@ -400,7 +372,7 @@ class MonteCarloLocalization:
                 f"expected_ranges returned {expected.shape}, expected "
                 f"({len(self._particles)}, {len(readings)})"
             )
-        log_p = kernels.beam_log_likelihoods(
+        log_p = mcl_kernels.beam_log_likelihoods(
             readings, expected, s.mixture, self._max_range_m, _COMBINATION_CODE[s.beam_combination]
         )
         with np.errstate(divide="ignore"):
@@ -432,9 +404,9 @@ class MonteCarloLocalization:
         s = self.settings
         # KLD: visit a systematic resample of max_particles in random order until the
         # histogram bound is met (each draw distributed as the weights)
-        comb = kernels.systematic_indices(self._weights, s.max_particles, self._rng.random())
+        comb = mcl_kernels.systematic_indices(self._weights, s.max_particles, self._rng.random())
         draws = self._particles[comb[self._rng.permutation(s.max_particles)]]
-        count = kernels.kld_sample_count(
+        count = mcl_kernels.kld_sample_count(
             np.ascontiguousarray(draws),
             self._kld_origin,
             self._kld_cell,
@@ -446,7 +418,7 @@ class MonteCarloLocalization:
         )
         share = self.random_share
         n_random = int(self._rng.binomial(count, share)) if share > 0 else 0
-        kept = kernels.systematic_indices(self._weights, count - n_random, self._rng.random())
+        kept = mcl_kernels.systematic_indices(self._weights, count - n_random, self._rng.random())
         new = self._particles[kept]
         if n_random:
             new = np.concatenate([new, self.uniform_poses(n_random)])
@@ -456,7 +428,7 @@ class MonteCarloLocalization:
     # -- the estimate -----------------------------------------------------------------
     def estimate(self) -> PoseEstimate:
         """Weighted mean and covariance of the particles (at the last filter update)."""
-        mean, cov = kernels.weighted_pose_moments(self._particles, self._weights)
+        mean, cov = mcl_kernels.weighted_pose_moments(self._particles, self._weights)
         return PoseEstimate(mean=mean, cov=cov)
 
     def pose_at(self, odom_pose) -> np.ndarray:
