@@ -1,0 +1,269 @@
+"""Benchmark of the default pipeline on every built-in floor plan, one subprocess per plan.
+
+    python benchmarks/buildings.py [PLAN ...] [--duration S] [--timeout S] [--memory-gib G] [--write]
+
+Runs what ``robotsim run`` runs (simulation, dead reckoning, interval epochs, fusion,
+summary, rerun recording to a temporary file) on each built-in scenario (default: all of
+them, plus ``big_hall`` with ``lost_echo_prob = 0.5``), ``--duration`` simulated seconds
+each (default 60). Each run is a child process, so its peak memory is its own (the
+``ru_maxrss`` of ``os.wait4``); its address space is capped with ``RLIMIT_AS``
+(``--memory-gib``, default 4) so that a run asking for too much fails with a
+``MemoryError`` (reported ``memory > cap``) instead of exhausting the machine, and it is
+killed after ``--timeout`` wall seconds (reported ``timeout``). Reported per plan, from
+the run's summary (``scenarios.runner.RunResult.summary_with_timing``): the real-time
+factor of the whole run, the interval epoch's median and 95th percentile, the global
+localisation time (the first epoch, always a global one), the peak memory, the mean area
+of the outer set and the containment. Before its plan, each child runs 3 s of ``hall``
+untimed, so that loading the compiled kernels is not counted in the first epoch.
+
+The targets of issue 13: at least 100x real time, tracking epoch p95 at most 10 ms, global
+localisation at most 1 s on ``office_floor``, peak memory at most 1 GiB everywhere.
+
+``--write`` puts the table in the ``Buildings`` section of ``BENCHMARKS.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from _common import machine_line, markdown_table, write_section
+
+#: Variants benchmarked besides the built-in scenarios: name -> (scenario, TOML appended).
+VARIANTS = {
+    "big_hall, lost_echo_prob 0.5": ("big_hall", "[sensors.sonar]\nlost_echo_prob = 0.5\n"),
+}
+
+#: Simulated seconds of ``hall`` a child runs before its plan (one-time costs out of the figures).
+WARM_UP_S = 3.0
+
+#: Exit status of a child whose run raised ``MemoryError`` (the address-space cap).
+MEMORY_EXIT = 3
+
+SECTION = "Buildings: the default pipeline on every built-in floor plan"
+
+
+# The child: one run -------------------------------------------------------------------
+
+
+def child(name: str, duration_s: float, out: Path) -> int:
+    """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``."""
+    from scenarios.epochs import GLOBAL
+    from scenarios.recording import write_recording
+    from scenarios.runner import run_scenario
+    from scenarios.spec import BUILTIN_FOLDER, load_scenario, parse_scenario
+
+    if name in VARIANTS:
+        base, extra = VARIANTS[name]
+        path = Path(str(BUILTIN_FOLDER / f"{base}.toml"))
+        text = path.read_text(encoding="utf-8") + "\n" + extra
+        spec = parse_scenario(text, source=name, base_dir=path.parent, name=base)
+    else:
+        spec = load_scenario(name)
+    spec = spec.with_run(duration_s=duration_s)
+    try:
+        # warm-up, not timed: loads the compiled kernels (numba's cache) and the lazy imports,
+        # which would otherwise land in the first epoch, the global localisation
+        run_scenario(load_scenario("hall").with_run(duration_s=WARM_UP_S))
+        start = time.perf_counter()
+        result = run_scenario(spec)
+        with tempfile.TemporaryDirectory() as folder:
+            clock = time.perf_counter()
+            write_recording(Path(folder) / "run.rrd", spec, result.log, result.estimation)
+            recording_s = time.perf_counter() - clock
+        summary = result.summary_with_timing(
+            recording_s=recording_s, wall_s=time.perf_counter() - start
+        )
+    except MemoryError:
+        print(f"{name}: MemoryError", file=sys.stderr)
+        return MEMORY_EXIT
+    epochs = result.estimation.epochs
+    is_global = epochs.status == GLOBAL
+    summary["global_localisation_ms"] = (
+        1e3 * float(epochs.elapsed_s[is_global][0]) if is_global.any() else None
+    )
+    summary["segments"] = len(spec.map.segments)
+    out.write_text(json.dumps(summary), encoding="utf-8")
+    return 0
+
+
+# The parent: one subprocess per plan --------------------------------------------------
+
+
+@dataclass
+class Outcome:
+    """What one child gave: its status, its peak memory and (when it finished) its summary."""
+
+    name: str
+    status: str
+    wall_s: float
+    peak_mib: float
+    summary: dict | None
+
+
+def _cap_memory(limit_bytes: int) -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+
+
+def run_child(name: str, duration_s: float, timeout_s: float, memory_gib: float) -> Outcome:
+    """One plan in a child process capped at ``memory_gib`` GiB of address space and
+    ``timeout_s`` wall seconds."""
+    limit = int(memory_gib * 2**30)
+    with tempfile.TemporaryDirectory() as folder:
+        out, err = Path(folder) / "summary.json", Path(folder) / "stderr.txt"
+        command = [sys.executable, __file__, "--child", name, "--duration", str(duration_s)]
+        command += ["--out", str(out)]
+        start = time.perf_counter()
+        with open(err, "wb") as stderr:
+            # preexec_fn runs between fork and exec: it only sets the limit
+            child_process = subprocess.Popen(
+                command,
+                stdout=subprocess.DEVNULL,
+                stderr=stderr,
+                preexec_fn=lambda: _cap_memory(limit),
+            )
+        status_word, usage, timed_out = 0, None, False
+        try:
+            while True:
+                pid, status_word, usage = os.wait4(child_process.pid, os.WNOHANG)
+                if pid:
+                    break
+                if time.perf_counter() - start > timeout_s:
+                    os.kill(child_process.pid, signal.SIGKILL)
+                    _, status_word, usage = os.wait4(child_process.pid, 0)
+                    timed_out = True
+                    break
+                time.sleep(0.1)
+        except BaseException:  # Ctrl-C or any error here: never leave the child running
+            os.kill(child_process.pid, signal.SIGKILL)
+            os.wait4(child_process.pid, 0)
+            raise
+        child_process.returncode = os.waitstatus_to_exitcode(status_word)
+        wall_s = time.perf_counter() - start
+        peak_mib = usage.ru_maxrss / 1024.0 if usage else float("nan")  # KiB on Linux
+        code = child_process.returncode
+        message = err.read_text(encoding="utf-8", errors="replace").strip().splitlines()
+        if timed_out:
+            status = f"timeout (> {timeout_s:g} s)"
+        elif code == MEMORY_EXIT or any("MemoryError" in line for line in message[-3:]):
+            status = f"memory > {memory_gib:g} GiB"
+        elif code != 0:
+            status = f"failed (exit {code}: {message[-1] if message else 'no message'})"
+        else:
+            status = "ok"
+        summary = json.loads(out.read_text(encoding="utf-8")) if out.is_file() else None
+    return Outcome(name, status, wall_s, peak_mib, summary)
+
+
+def _figure(value, pattern: str) -> str:
+    return "-" if value is None else pattern.format(value)
+
+
+def table_row(outcome: Outcome) -> list[str]:
+    """A markdown row: plan, segments, real-time factor, epoch median/p95, global
+    localisation, peak memory, mean set area, containment, status."""
+    s = outcome.summary or {}
+    timing = s.get("timing", {})
+    box = s.get("box") or {}
+    status = outcome.status
+    if s and s.get("containment") is not None and s["containment"] < 1.0:
+        status += f", containment {s['containment']:.3f}"
+    return [
+        outcome.name,
+        _figure(s.get("segments"), "{}"),
+        _figure(timing.get("realtime_factor"), "{:.1f}x"),
+        _figure(timing.get("ia_epoch_ms_median"), "{:.1f}")
+        + " / "
+        + _figure(timing.get("ia_epoch_ms_p95"), "{:.1f}"),
+        _figure(s.get("global_localisation_ms"), "{:.0f}"),
+        f"{outcome.peak_mib:.0f}",
+        _figure(box.get("mean_area_m2"), "{:.3f}"),
+        _figure(s.get("empty_epochs"), "{}"),
+        status,
+    ]
+
+
+HEADER = [
+    "plan",
+    "segments",
+    "real-time factor",
+    "epoch median / p95 (ms)",
+    "global localisation (ms)",
+    "peak memory (MiB)",
+    "mean set area (m²)",
+    "empty epochs",
+    "status",
+]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("plans", nargs="*", help="built-in scenarios or variants (default: all)")
+    parser.add_argument(
+        "--duration", type=float, default=60.0, help="simulated seconds (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=300.0, help="wall seconds per plan (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--memory-gib",
+        type=float,
+        default=4.0,
+        help="address-space cap per plan, GiB (default: %(default)s)",
+    )
+    parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
+    parser.add_argument("--child", metavar="PLAN", help=argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child:
+        return child(args.child, args.duration, args.out)
+
+    from scenarios.spec import builtin_names
+
+    known = (*builtin_names(), *VARIANTS)
+    plans = args.plans or list(known)
+    unknown = [plan for plan in plans if plan not in known]
+    if unknown:
+        parser.error(f"unknown plan {unknown[0]!r}; choose from {', '.join(known)}")
+    if not (args.duration > 0 and args.timeout > 0 and args.memory_gib > 0):
+        parser.error("--duration, --timeout and --memory-gib must be > 0")
+
+    load_before = os.getloadavg()
+    rows = []
+    for plan in plans:
+        outcome = run_child(plan, args.duration, args.timeout, args.memory_gib)
+        rows.append(table_row(outcome))
+        print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
+    load_after = os.getloadavg()
+    body = "\n".join(
+        [
+            f"`python benchmarks/buildings.py --duration {args.duration:g} --timeout "
+            f"{args.timeout:g} --memory-gib {args.memory_gib:g}`: {args.duration:g} s simulated "
+            "per plan, the default pipeline of each scenario (as `robotsim run`, recording "
+            "included), one child process per plan capped at "
+            f"{args.memory_gib:g} GiB of address space and {args.timeout:g} s. Global "
+            "localisation: the first epoch. Epoch times: all epochs of the run.",
+            "",
+            markdown_table(HEADER, rows),
+            "",
+            f"Machine: {machine_line('numba', 'shapely')}; 1-minute load "
+            f"{load_before[0]:.1f} before, {load_after[0]:.1f} after.",
+        ]
+    )
+    print(body)
+    if args.write:
+        write_section(SECTION, body)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
