@@ -27,12 +27,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import signal
 import subprocess
 import sys
 import tempfile
 import time
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -83,8 +85,11 @@ def child(name: str, duration_s: float, out: Path) -> int:
         summary = result.summary_with_timing(
             recording_s=recording_s, wall_s=time.perf_counter() - start
         )
-    except MemoryError:
-        print(f"{name}: MemoryError", file=sys.stderr)
+    except MemoryError as error:
+        # one line for the parent's table: the allocation refused and where it was asked for
+        where = traceback.extract_tb(error.__traceback__)[-1]
+        place = f"{Path(where.filename).name}:{where.lineno} {where.name}"
+        print(f"MemoryError at {place}: {error}", file=sys.stderr)
         return MEMORY_EXIT
     epochs = result.estimation.epochs
     is_global = epochs.status == GLOBAL
@@ -155,13 +160,22 @@ def run_child(name: str, duration_s: float, timeout_s: float, memory_gib: float)
         if timed_out:
             status = f"timeout (> {timeout_s:g} s)"
         elif code == MEMORY_EXIT or any("MemoryError" in line for line in message[-3:]):
-            status = f"memory > {memory_gib:g} GiB"
+            status = f"memory > {memory_gib:g} GiB ({_refused(message)})"
         elif code != 0:
             status = f"failed (exit {code}: {message[-1] if message else 'no message'})"
         else:
             status = "ok"
         summary = json.loads(out.read_text(encoding="utf-8")) if out.is_file() else None
     return Outcome(name, status, wall_s, peak_mib, summary)
+
+
+def _refused(message: list[str]) -> str:
+    """What the child's ``MemoryError`` line says, shortened: the size asked and where."""
+    line = next((line for line in reversed(message) if "MemoryError" in line), "")
+    size = re.search(r"allocate ([0-9.]+ [KMGTP]?i?B)", line)
+    place = re.search(r"at (\S+:\d+ \S+)", line)
+    parts = [f"asked {size.group(1)}" if size else "", place.group(1) if place else ""]
+    return ", ".join(part for part in parts if part) or "MemoryError"
 
 
 def _figure(value, pattern: str) -> str:
