@@ -1,6 +1,7 @@
 """Benchmark of the default pipeline on every built-in floor plan, one subprocess per plan.
 
-    python benchmarks/buildings.py [PLAN ...] [--duration S] [--timeout S] [--memory-gib G] [--write]
+    python benchmarks/buildings.py [PLAN ...] [--duration S] [--timeout S] [--memory-gib G]
+                                   [--compare DIR] [--write]
 
 Runs what ``robotsim run`` runs (simulation, dead reckoning, interval epochs, fusion,
 summary, rerun recording to a temporary file) on each built-in scenario (default: all of
@@ -8,18 +9,24 @@ them, plus ``big_hall`` with ``lost_echo_prob = 0.5``), ``--duration`` simulated
 each (default 60). Each run is a child process, so its peak memory is its own (the
 ``ru_maxrss`` of ``os.wait4``); its address space is capped with ``RLIMIT_AS``
 (``--memory-gib``, default 4) so that a run asking for too much fails with a
-``MemoryError`` (reported ``memory > cap``) instead of exhausting the machine, and it is
-killed after ``--timeout`` wall seconds (reported ``timeout``). Reported per plan, from
-the run's summary (``scenarios.runner.RunResult.summary_with_timing``): the real-time
-factor of the whole run, the interval epoch's median and 95th percentile, the global
-localisation time (the first epoch, always a global one), the peak memory, the mean area
-of the outer set and the containment. Before its plan, each child runs 3 s of ``hall``
-untimed, so that loading the compiled kernels is not counted in the first epoch.
+``MemoryError`` (reported ``memory > cap``, with the size asked and where) instead of
+exhausting the machine, and it is killed after ``--timeout`` wall seconds (reported
+``timeout``). Before its plan, each child runs 3 s of ``hall`` untimed, so that loading
+the compiled kernels is not counted in the first epoch.
 
-The targets of issue 13: at least 100x real time, tracking epoch p95 at most 10 ms, global
-localisation at most 1 s on ``office_floor``, peak memory at most 1 GiB everywhere.
+Reported per plan, from the run's summary (``scenarios.runner.RunResult.summary_with_timing``)
+and its epoch log: the real-time factor of the whole run, the interval epoch's median and
+95th percentile (all epochs), the 95th percentile of the tracking epochs alone, the global
+localisation time (the first epoch, always a global one), the peak memory, the mean (x, y)
+area of the outer set, the epochs without a set, and the status (with the containment
+when below 1). The targets of issue 13: at least 100x real time, tracking epoch p95 at
+most 10 ms, global localisation at most 1 s on ``office_floor``, peak memory at most
+1 GiB everywhere.
 
-``--write`` puts the table in the ``Buildings`` section of ``BENCHMARKS.md``.
+``--compare DIR`` runs each plan a second time with another source tree's code (a
+checkout of another commit; the scenario files are always this checkout's), for figures
+side by side; the ``code`` column names each row's commit. ``--write`` puts the table in
+the ``Buildings`` section of ``BENCHMARKS.md``.
 """
 
 from __future__ import annotations
@@ -38,12 +45,17 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from _common import machine_line, markdown_table, write_section
 
 #: Variants benchmarked besides the built-in scenarios: name -> (scenario, TOML appended).
 VARIANTS = {
     "big_hall, lost_echo_prob 0.5": ("big_hall", "[sensors.sonar]\nlost_echo_prob = 0.5\n"),
 }
+
+#: The source tree this script belongs to, and its built-in scenario files.
+REPOSITORY = Path(__file__).resolve().parent.parent
+SCENARIO_FOLDER = REPOSITORY / "scenarios" / "builtin"
 
 #: Simulated seconds of ``hall`` a child runs before its plan (one-time costs out of the figures).
 WARM_UP_S = 3.0
@@ -59,23 +71,23 @@ SECTION = "Buildings: the default pipeline on every built-in floor plan"
 
 def child(name: str, duration_s: float, out: Path) -> int:
     """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``."""
-    from scenarios.epochs import GLOBAL
+    from scenarios.epochs import GLOBAL, TRACKING
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
-    from scenarios.spec import BUILTIN_FOLDER, load_scenario, parse_scenario
+    from scenarios.spec import load_scenario, parse_scenario
 
-    if name in VARIANTS:
-        base, extra = VARIANTS[name]
-        path = Path(str(BUILTIN_FOLDER / f"{base}.toml"))
-        text = path.read_text(encoding="utf-8") + "\n" + extra
-        spec = parse_scenario(text, source=name, base_dir=path.parent, name=base)
-    else:
-        spec = load_scenario(name)
+    # the scenario files of this checkout, so that another code tree (--compare) runs them too
+    base, extra = VARIANTS.get(name, (name, ""))
+    path = SCENARIO_FOLDER / f"{base}.toml"
+    text = path.read_text(encoding="utf-8") + "\n" + extra
+    spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
     spec = spec.with_run(duration_s=duration_s)
     try:
         # warm-up, not timed: loads the compiled kernels (numba's cache) and the lazy imports,
         # which would otherwise land in the first epoch, the global localisation
-        run_scenario(load_scenario("hall").with_run(duration_s=WARM_UP_S))
+        run_scenario(
+            load_scenario(str(SCENARIO_FOLDER / "hall.toml")).with_run(duration_s=WARM_UP_S)
+        )
         start = time.perf_counter()
         result = run_scenario(spec)
         with tempfile.TemporaryDirectory() as folder:
@@ -96,6 +108,10 @@ def child(name: str, duration_s: float, out: Path) -> int:
     summary["global_localisation_ms"] = (
         1e3 * float(epochs.elapsed_s[is_global][0]) if is_global.any() else None
     )
+    tracking_ms = 1e3 * epochs.elapsed_s[epochs.status == TRACKING]
+    summary["tracking_epoch_ms_p95"] = (
+        float(np.percentile(tracking_ms, 95)) if tracking_ms.size else None
+    )
     summary["segments"] = len(spec.map.segments)
     out.write_text(json.dumps(summary), encoding="utf-8")
     return 0
@@ -115,14 +131,31 @@ class Outcome:
     summary: dict | None
 
 
+def code_label(tree: Path) -> str:
+    """The tree's commit (``git describe --always --dirty``), or its folder name."""
+    try:
+        done = subprocess.run(
+            ["git", "-C", str(tree), "describe", "--always", "--dirty"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return done.stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return tree.name
+
+
 def _cap_memory(limit_bytes: int) -> None:
     resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
 
 
-def run_child(name: str, duration_s: float, timeout_s: float, memory_gib: float) -> Outcome:
-    """One plan in a child process capped at ``memory_gib`` GiB of address space and
-    ``timeout_s`` wall seconds."""
+def run_child(
+    name: str, duration_s: float, timeout_s: float, memory_gib: float, code: Path
+) -> Outcome:
+    """One plan in a child process importing the code tree ``code`` (its ``PYTHONPATH``),
+    capped at ``memory_gib`` GiB of address space and ``timeout_s`` wall seconds."""
     limit = int(memory_gib * 2**30)
+    environment = {**os.environ, "PYTHONPATH": str(code)}
     with tempfile.TemporaryDirectory() as folder:
         out, err = Path(folder) / "summary.json", Path(folder) / "stderr.txt"
         command = [sys.executable, __file__, "--child", name, "--duration", str(duration_s)]
@@ -134,6 +167,7 @@ def run_child(name: str, duration_s: float, timeout_s: float, memory_gib: float)
                 command,
                 stdout=subprocess.DEVNULL,
                 stderr=stderr,
+                env=environment,
                 preexec_fn=lambda: _cap_memory(limit),
             )
         status_word, usage, timed_out = 0, None, False
@@ -198,6 +232,7 @@ def table_row(outcome: Outcome) -> list[str]:
         _figure(timing.get("ia_epoch_ms_median"), "{:.1f}")
         + " / "
         + _figure(timing.get("ia_epoch_ms_p95"), "{:.1f}"),
+        _figure(s.get("tracking_epoch_ms_p95"), "{:.1f}"),
         _figure(s.get("global_localisation_ms"), "{:.0f}"),
         f"{outcome.peak_mib:.0f}",
         _figure(box.get("mean_area_m2"), "{:.3f}"),
@@ -208,9 +243,11 @@ def table_row(outcome: Outcome) -> list[str]:
 
 HEADER = [
     "plan",
+    "code",
     "segments",
     "real-time factor",
     "epoch median / p95 (ms)",
+    "tracking epoch p95 (ms)",
     "global localisation (ms)",
     "peak memory (MiB)",
     "mean set area (m²)",
@@ -234,6 +271,12 @@ def main(argv: list[str] | None = None) -> int:
         default=4.0,
         help="address-space cap per plan, GiB (default: %(default)s)",
     )
+    parser.add_argument(
+        "--compare",
+        type=Path,
+        metavar="DIR",
+        help="another source tree (a checkout) to run each plan with too, side by side",
+    )
     parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
     parser.add_argument("--child", metavar="PLAN", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
@@ -250,13 +293,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown plan {unknown[0]!r}; choose from {', '.join(known)}")
     if not (args.duration > 0 and args.timeout > 0 and args.memory_gib > 0):
         parser.error("--duration, --timeout and --memory-gib must be > 0")
+    trees = [REPOSITORY]
+    if args.compare:
+        if not (args.compare / "scenarios" / "runner.py").is_file():
+            parser.error(f"--compare {args.compare}: not a source tree (no scenarios/runner.py)")
+        trees.append(args.compare.resolve())
 
     load_before = os.getloadavg()
     rows = []
     for plan in plans:
-        outcome = run_child(plan, args.duration, args.timeout, args.memory_gib)
-        rows.append(table_row(outcome))
-        print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
+        for tree in trees:
+            outcome = run_child(plan, args.duration, args.timeout, args.memory_gib, tree)
+            rows.append([table_row(outcome)[0], code_label(tree), *table_row(outcome)[1:]])
+            print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
     load_after = os.getloadavg()
     body = "\n".join(
         [
