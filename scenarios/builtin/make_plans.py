@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from scenarios.outputs import write_text
+
 #: Where the map files go: ``scenarios/builtin/maps/<name>.wkt``.
 MAPS_DIR = Path(__file__).resolve().parent / "maps"
 
@@ -334,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
                 stale.append(path)
             continue
         path.parent.mkdir(exist_ok=True)
-        path.write_text(text, encoding="utf-8")
+        write_text(path, text)
         print(f"{path}: {plan.segment_count()} segments")
     for path in stale:
         print(f"stale or missing: {path} (run python -m scenarios.builtin.make_plans)")
