@@ -207,7 +207,7 @@ def _refused(message: list[str]) -> str:
     """What the child's ``MemoryError`` line says, shortened: the size asked and where."""
     line = next((line for line in reversed(message) if "MemoryError" in line), "")
     size = re.search(r"allocate ([0-9.]+ [KMGTP]?i?B)", line)
-    place = re.search(r"at (\S+:\d+ \S+)", line)
+    place = re.search(r"at (\S+:\d+ \w+)", line)
     parts = [f"asked {size.group(1)}" if size else "", place.group(1) if place else ""]
     return ", ".join(part for part in parts if part) or "MemoryError"
 
@@ -298,13 +298,16 @@ def main(argv: list[str] | None = None) -> int:
         if not (args.compare / "scenarios" / "runner.py").is_file():
             parser.error(f"--compare {args.compare}: not a source tree (no scenarios/runner.py)")
         trees.append(args.compare.resolve())
+    labels = {tree: code_label(tree) for tree in trees}  # once: the trees may change meanwhile
+    # a polite kill (SIGTERM) unwinds like Ctrl-C, so the running child is killed too
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
 
     load_before = os.getloadavg()
     rows = []
     for plan in plans:
         for tree in trees:
             outcome = run_child(plan, args.duration, args.timeout, args.memory_gib, tree)
-            rows.append([table_row(outcome)[0], code_label(tree), *table_row(outcome)[1:]])
+            rows.append([table_row(outcome)[0], labels[tree], *table_row(outcome)[1:]])
             print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
     load_after = os.getloadavg()
     body = "\n".join(
