@@ -56,7 +56,7 @@ def draw(spec: ScenarioSpec, path: Path) -> None:
     axes = figure.add_subplot()
     if segment_map.boundary is not None:
         axes.add_patch(Polygon(segment_map.boundary, closed=True, color="#f3f1ea", zorder=0))
-    walls = LineCollection(segment_map.segments, colors="#222222", linewidths=1.4, zorder=2)
+    walls = LineCollection(list(segment_map.segments), colors="#222222", linewidths=1.4, zorder=2)
     axes.add_collection(walls)
     route = route_points(spec)
     axes.plot(*route.T, color="#1f77b4", linewidth=1.0, zorder=3)
