@@ -69,6 +69,26 @@ SECTION = "Buildings: the default pipeline on every built-in floor plan"
 # The child: one run -------------------------------------------------------------------
 
 
+def progress_path(out: Path) -> Path:
+    """Where a child keeps the share of its run done (read when it is killed)."""
+    return out.with_suffix(".progress")
+
+
+class ProgressFile:
+    """A ``run_scenario`` progress callback writing the share done (percent) to a file,
+    once per percent."""
+
+    def __init__(self, path: Path):
+        self._path = path
+        self._percent = -1
+
+    def __call__(self, fraction: float) -> None:
+        percent = int(100 * fraction)
+        if percent != self._percent:
+            self._percent = percent
+            self._path.write_text(str(percent), encoding="ascii")
+
+
 def child(name: str, duration_s: float, out: Path) -> int:
     """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``."""
     from scenarios.epochs import GLOBAL, TRACKING
@@ -89,7 +109,7 @@ def child(name: str, duration_s: float, out: Path) -> int:
             load_scenario(str(SCENARIO_FOLDER / "hall.toml")).with_run(duration_s=WARM_UP_S)
         )
         start = time.perf_counter()
-        result = run_scenario(spec)
+        result = run_scenario(spec, progress=ProgressFile(progress_path(out)))
         with tempfile.TemporaryDirectory() as folder:
             clock = time.perf_counter()
             write_recording(Path(folder) / "run.rrd", spec, result.log, result.estimation)
@@ -192,7 +212,7 @@ def run_child(
         code = child_process.returncode
         message = err.read_text(encoding="utf-8", errors="replace").strip().splitlines()
         if timed_out:
-            status = f"timeout (> {timeout_s:g} s)"
+            status = f"timeout (> {timeout_s:g} s{_progress_note(progress_path(out))})"
         elif code == MEMORY_EXIT or any("MemoryError" in line for line in message[-3:]):
             status = f"memory > {memory_gib:g} GiB ({_refused(message)})"
         elif code != 0:
@@ -203,12 +223,29 @@ def run_child(
     return Outcome(name, status, wall_s, peak_mib, summary)
 
 
+def _progress_note(path: Path) -> str:
+    """How far a killed child got: the share of its interval epochs done (the progress
+    callback's fraction past the simulation's share, ``scenarios.runner``)."""
+    from scenarios.runner import SIMULATION_PROGRESS
+
+    if not path.is_file():
+        return ""
+    fraction = int(path.read_text(encoding="ascii")) / 100.0
+    if fraction < SIMULATION_PROGRESS:
+        return ", in the simulation"
+    epochs = (fraction - SIMULATION_PROGRESS) / (1.0 - SIMULATION_PROGRESS)
+    return f", {epochs:.0%} of the epochs done"
+
+
 def _refused(message: list[str]) -> str:
     """What the child's ``MemoryError`` line says, shortened: the size asked and where."""
     line = next((line for line in reversed(message) if "MemoryError" in line), "")
-    size = re.search(r"allocate ([0-9.]+ [KMGTP]?i?B)", line)
+    size = re.search(r"allocate ([0-9]+(?:\.[0-9]+)?)\.? ([KMGTP]?i?B)", line)
     place = re.search(r"at (\S+:\d+ \w+)", line)
-    parts = [f"asked {size.group(1)}" if size else "", place.group(1) if place else ""]
+    parts = [
+        f"asked {size.group(1)} {size.group(2)}" if size else "",
+        place.group(1) if place else "",
+    ]
     return ", ".join(part for part in parts if part) or "MemoryError"
 
 
