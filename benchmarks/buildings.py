@@ -351,10 +351,12 @@ def main(argv: list[str] | None = None) -> int:
         [
             f"`python benchmarks/buildings.py --duration {args.duration:g} --timeout "
             f"{args.timeout:g} --memory-gib {args.memory_gib:g}`: {args.duration:g} s simulated "
-            "per plan, the default pipeline of each scenario (as `robotsim run`, recording "
-            "included), one child process per plan capped at "
-            f"{args.memory_gib:g} GiB of address space and {args.timeout:g} s. Global "
-            "localisation: the first epoch. Epoch times: all epochs of the run.",
+            "per plan with the scenario's own settings (the default pipeline, as `robotsim run`, "
+            "recording included), one child process per plan capped at "
+            f"{args.memory_gib:g} GiB of address space and {args.timeout:g} s of wall time. "
+            "Epoch median / p95: all epochs; tracking p95: the tracking epochs alone; global "
+            "localisation: the first epoch. Issue 13's targets: >= 100x real time, tracking "
+            "p95 <= 10 ms, global localisation <= 1 s on office_floor, peak memory <= 1 GiB.",
             "",
             markdown_table(HEADER, rows),
             "",
