@@ -62,7 +62,16 @@ def wall_stats(pose: np.ndarray, segments: np.ndarray, reach_m: float) -> dict[s
     ``reach_m`` is the robot radius plus the walls' collision radius; a gap below
     ``CONTACT_GAP_M`` is a contact (pymunk lets shapes overlap by its collision slop).
     """
-    distance = point_segment_distance(pose[:, None, :2], segments[:, 0], segments[:, 1]).min(axis=1)
+    # Chunks of samples keep the (samples, segments) distance array near 8 MB on any map.
+    chunk = max(1, 1_000_000 // max(1, len(segments)))
+    distance = np.concatenate(
+        [
+            point_segment_distance(
+                pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
+            ).min(axis=1)
+            for start in range(0, len(pose), chunk)
+        ]
+    )
     gap = distance - reach_m
     return {
         "min_gap_m": float(gap.min()),

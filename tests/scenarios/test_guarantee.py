@@ -25,6 +25,11 @@ from scenarios.spec import builtin_names, load_scenario
 
 SHORT_S = 15.0
 
+#: Built-in plans the interval stage cannot yet run within a test's time and memory (issue
+#: 13: global localisation on big_hall asks for 32 GiB, corridor and office_floor run slower
+#: than real time); benchmarks/buildings.py measures them. Drop names here as they scale.
+TOO_LARGE_FOR_NOW = ("big_hall", "corridor", "office_floor")
+
 
 def with_estimation(spec, **changes):
     return spec.with_estimation(**changes)
@@ -72,7 +77,9 @@ def check_sound_fusion(estimation):
     assert np.all(np.isfinite(estimation.pose))
 
 
-@pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.parametrize(
+    "name", [name for name in builtin_names() if name not in TOO_LARGE_FOR_NOW]
+)
 @pytest.mark.parametrize(
     "seed", [1, 2, *(pytest.param(seed, marks=pytest.mark.slow) for seed in (3, 4, 5))]
 )

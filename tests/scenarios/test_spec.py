@@ -43,7 +43,8 @@ def refused(text: str, **kwargs) -> ScenarioError:
 
 
 def test_every_builtin_scenario_parses_and_uses_its_map():
-    assert set(builtin_names()) == set(BUILTIN_MAP_NAMES)
+    # a scenario per built-in map; the floor plans of scenarios/builtin/maps are map files
+    assert set(BUILTIN_MAP_NAMES) <= set(builtin_names())
     for name in builtin_names():
         spec = load_scenario(name)
         assert spec.name == name
