@@ -2,6 +2,7 @@
 
     robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
     robotsim scenarios
+    robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
     robotsim reproduce NAME [options]
 
 A user's mistake (bad scenario file, impossible setting, NaN reading) prints one line
@@ -27,6 +28,7 @@ EXIT_USER_ERROR = 2
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``robotsim`` with its sub-commands."""
+    from scenarios import campaign as campaign_command
     from scenarios import commands
     from scenarios.reproduce import experiments
 
@@ -42,6 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     listing = sub.add_parser("scenarios", help="list the built-in scenarios")
     listing.set_defaults(handler=commands.list_scenarios)
+
+    campaign = sub.add_parser(
+        "campaign", help="run every scenario x seed x setting of a campaign file; one results table"
+    )
+    campaign_command.add_arguments(campaign)
+    campaign.set_defaults(handler=campaign_command.main)
 
     reproduce = sub.add_parser("reproduce", help="reproduce a paper's experiment")
     rsub = reproduce.add_subparsers(dest="experiment", required=True, metavar="NAME")
