@@ -50,6 +50,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -60,7 +61,7 @@ from localization.errors import EstimationError
 from robotsim.errors import RobotsimError
 from scenarios import outputs
 from scenarios.errors import ScenarioError
-from scenarios.spec import ScenarioSpec, load_scenario
+from scenarios.spec import ScenarioSpec, builtin_names, load_scenario
 from scenarios.tables import Table
 
 #: Where ``robotsim campaign`` writes when no ``--out`` is given: ``runs/<campaign stem>``.
@@ -240,8 +241,6 @@ def flatten_tables(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def _load_named(name: str, base_dir: Path, source: str, key: str) -> ScenarioSpec:
     """A built-in scenario, or a scenario file relative to the campaign file's folder."""
-    from scenarios.spec import builtin_names
-
     if name in builtin_names():
         return load_scenario(name)
     path = Path(name)
@@ -516,6 +515,7 @@ class CampaignProgress:
         self._start = time.perf_counter()
         self._tty = stream.isatty()
         self._shown_tenth = -1
+        self._closed = False
         self.update([])
 
     def update(self, rows: list[dict[str, Any]]) -> None:
@@ -540,14 +540,12 @@ class CampaignProgress:
             self._stream.write(line + "\n")
         self._stream.flush()
 
-    @property
-    def failed(self) -> int:
-        return self._failed
-
     def close(self) -> None:
-        if self._tty:
+        """End the bar's line on a terminal (once)."""
+        if self._tty and not self._closed:
             self._stream.write("\n")
             self._stream.flush()
+        self._closed = True
 
 
 def _duration(seconds: float) -> str:
@@ -634,6 +632,17 @@ def main(args: argparse.Namespace) -> int:
                 execute_dask(batches, args.scheduler, workers, sink)
             else:
                 execute_local(batches, workers, sink)
+    except BrokenProcessPool:
+        # a worker process died (out of memory, killed): the runs it had are not recorded as
+        # failures, since they did not fail on their own; they stay missing for --resume
+        progress.close()
+        left = len(campaign.runs) - len(folder.done_keys())
+        print(
+            f"robotsim: a worker process died; {left} run(s) not done: "
+            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
+            file=sys.stderr,
+        )
+        return 1
     finally:
         progress.close()
     results = folder.merge(campaign)

@@ -226,3 +226,54 @@ def test_a_folder_that_is_not_empty_is_never_written_into_without_resume(tmp_pat
 def test_flatten_joins_keys_and_list_positions_with_dots():
     tree = {"a": {"b": [1, 2], "c": None}, "d": "x"}
     assert campaign_module.flatten(tree) == {"a.b.0": 1, "a.b.1": 2, "a.c": None, "d": "x"}
+
+
+def pool_workers(pid: int) -> list[int]:
+    """The process-pool workers among the children of ``pid`` (not multiprocessing's
+    resource tracker)."""
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    workers = []
+    for child in map(int, children):
+        try:
+            command = Path(f"/proc/{child}/cmdline").read_bytes()
+        except FileNotFoundError:
+            continue
+        if b"spawn_main" in command:
+            workers.append(child)
+    return workers
+
+
+@pytest.mark.slow
+def test_a_worker_killed_by_the_system_leaves_its_runs_missing_not_failed(tmp_path):
+    """A worker process that dies (the kernel's OOM killer, an operator) is no failure of
+    its runs: the campaign stops with status 1 and a hint, and ``--resume`` runs the rest."""
+    text = CAMPAIGN.replace("count = 2", "count = 3")  # 6 runs
+    path = write(tmp_path, text)
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "scenarios.cli", "campaign", str(path), "--out", str(out)]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    campaign_process = subprocess.Popen(
+        [*command, "--workers", "1"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    parts = out / campaign_module.PARTS_DIR
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not list(parts.glob("*.parquet")):
+        assert campaign_process.poll() is None, "the campaign ended before a worker was killed"
+        time.sleep(0.05)
+    workers = pool_workers(campaign_process.pid)
+    assert len(workers) == 1
+    os.kill(workers[0], signal.SIGKILL)
+    _, stderr = campaign_process.communicate(timeout=300)
+    assert campaign_process.returncode == 1
+    assert "a worker process died" in stderr and "--resume" in stderr
+    done = len(list(parts.glob("*.parquet")))
+    assert 1 <= done < 6
+
+    resumed = subprocess.run([*command, "--resume"], env=env, capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    table = rows(out / campaign_module.RESULTS_FILE)
+    assert len(table) == 6 and all(r["status"] == "ok" for r in table)
