@@ -98,6 +98,9 @@ class CampaignRun:
     index: int
     """Position in the campaign's run order (scenario, replicate, grid point)."""
     scenario: str
+    """The scenario's name (the built-in name or the file's stem)."""
+    written: str
+    """The scenario as the campaign file names it (unique within the campaign)."""
     replicate: int
     settings: dict[str, Any]
     """The grid point: ``{"estimation.fusion": "clamp", ...}`` (empty without a grid)."""
@@ -105,9 +108,10 @@ class CampaignRun:
 
     @property
     def key(self) -> str:
-        """A name of the run that depends on what it runs only (scenario, seed, settings, duration)."""
+        """A name of the run that depends on what it runs only (scenario, seed, settings,
+        duration), not on its place in the campaign: it names the run's part."""
         described = {
-            "scenario": self.scenario,
+            "scenario": self.written,
             "seed": self.spec.run.seed,
             "duration_s": self.spec.run.duration_s,
             "settings": self.settings,
@@ -122,7 +126,6 @@ class Campaign:
     name: str
     source: str
     seed: int
-    grid_keys: tuple[str, ...]
     runs: tuple[CampaignRun, ...]
 
 
@@ -175,7 +178,7 @@ def load_campaign(path: str | Path) -> Campaign:
     run_seeds = replicate_seeds(seed, first, count)
     points = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
     runs: list[CampaignRun] = []
-    for spec_base in specs:
+    for written, spec_base in zip(names, specs, strict=True):
         for replicate, run_seed in zip(range(first, first + count), run_seeds, strict=True):
             seeded = spec_base.with_run(seed=run_seed)
             for point in points:
@@ -186,12 +189,13 @@ def load_campaign(path: str | Path) -> Campaign:
                     CampaignRun(
                         index=len(runs),
                         scenario=spec_base.name,
+                        written=written,
                         replicate=replicate,
                         settings=point,
                         spec=spec,
                     )
                 )
-    return Campaign(path.stem, source, seed, tuple(grid), tuple(runs))
+    return Campaign(path.stem, source, seed, tuple(runs))
 
 
 def _take_strings(table: Table, name: str) -> list[str]:
@@ -199,6 +203,8 @@ def _take_strings(table: Table, name: str) -> list[str]:
     value = table.take_raw(name)
     if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
         raise table.error(name, "must be a non-empty array of strings")
+    if len(set(value)) != len(value):
+        raise table.error(name, "lists a scenario twice")
     return list(value)
 
 

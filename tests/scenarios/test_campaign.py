@@ -193,6 +193,7 @@ def test_a_failing_run_is_recorded_with_its_error_and_the_others_finish(tmp_path
         (("count = 2", "count = 0"), "seeds.count", ">= 1"),
         (('["hall"]', '["nowhere"]'), "scenarios[0]", "neither a built-in scenario"),
         (('["hall"]', "[]"), "scenarios", "non-empty array"),
+        (('["hall"]', '["hall", "hall"]'), "scenarios", "twice"),
         (('"clamp", "truncated"', '"clamp", "clamp"'), "grid.estimation.fusion", "twice"),
         (("duration_s = 5.0", "duration_s = -1.0"), "duration_s", "> 0"),
     ],
