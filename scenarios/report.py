@@ -43,6 +43,9 @@ FIGURES = (
 
 CONFIDENCE = 0.95
 
+#: The figures compared run against run (same scenario and seed) in the paired table.
+PAIRED = ("rmse_position_m.fused", "rmse_heading_rad.fused", "nees.fused.pose.mean")
+
 
 def confidence_interval(values: np.ndarray) -> tuple[float, float, int]:
     """``(mean, half width, n)`` of the finite ``values``: the Student-t interval at
@@ -139,6 +142,51 @@ def markdown(records: list[dict[str, Any]], names: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def paired_differences(columns: dict[str, list[Any]]) -> list[dict[str, Any]]:
+    """Each setting against the first setting of its scenario, run against run: the
+    campaign gives every setting the same seeds (the same simulated worlds), so the mean of
+    the per-seed differences and its t interval (``confidence_interval`` of the differences)
+    say whether a setting beats the baseline with far fewer runs than two separate means.
+    Only seeds where both runs succeeded count."""
+    ok = [s == "ok" for s in columns["status"]]
+    seeds = columns.get("seed") or [None] * len(ok)
+    found = groups(columns)
+    baselines: dict[Any, tuple[Any, ...]] = {}
+    for group in found:
+        baselines.setdefault(group[0], group)
+    records = []
+    for group, rows in found.items():
+        baseline = baselines[group[0]]
+        if group == baseline:
+            continue
+        base_row = {seeds[i]: i for i in found[baseline] if ok[i]}
+        pairs = [(i, base_row[seeds[i]]) for i in rows if ok[i] and seeds[i] in base_row]
+        mine, theirs = np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int)
+        record: dict[str, Any] = {"group": group, "baseline": baseline, "figures": {}}
+        for name in PAIRED:
+            difference = column_values(columns, name, mine) - column_values(columns, name, theirs)
+            record["figures"][name] = confidence_interval(difference)
+        records.append(record)
+    return records
+
+
+def paired_markdown(records: list[dict[str, Any]], names: list[str]) -> str:
+    """The paired table: per setting, ``mean difference +- half width (pairs)`` against its
+    scenario's baseline setting."""
+    if not records:
+        return ""
+    labels = dict(FIGURES)
+    header = [*names, "baseline", *(f"Δ {labels[name]}" for name in PAIRED)]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for record in records:
+        cells = [str(v) for v in record["group"]] + [" ".join(map(str, record["baseline"][1:]))]
+        for name in PAIRED:
+            mean, half, n = record["figures"][name]
+            cells.append("" if n == 0 else f"{mean:+.3g} ± {half:.2g} ({n})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n## Paired against the baseline (same seeds)\n\n" + "\n".join(lines) + "\n"
+
+
 def figures(records: list[dict[str, Any]], folder: Path) -> list[Path]:
     """The three PNG figures of the report, in ``folder``."""
     import matplotlib
@@ -204,7 +252,8 @@ def main(args: argparse.Namespace) -> int:
     if out.is_dir() and any(out.iterdir()) and not (out / "report.md").is_file():
         raise ScenarioError(None, "--out", f"{out} is a folder that holds no report: not replaced")
     records = aggregate(columns)
-    table = markdown(records, setting_names(columns))
+    names = setting_names(columns)
+    table = markdown(records, names) + paired_markdown(paired_differences(columns), names)
     with outputs.atomic_directory(out) as tmp:
         (tmp / "report.md").write_text(table, encoding="utf-8")
         figures(records, tmp)

@@ -8,7 +8,7 @@ import pyarrow.parquet as pq
 from scipy import stats
 
 from scenarios.cli import EXIT_USER_ERROR, main
-from scenarios.report import aggregate, confidence_interval, load_results
+from scenarios.report import aggregate, confidence_interval, load_results, paired_differences
 
 
 def test_confidence_interval_is_scipys_t_interval():
@@ -29,6 +29,7 @@ def results_table(path):
             {
                 "run_index": i,
                 "scenario": "hall",
+                "seed": 100 + seed,
                 "setting.estimation.fusion": fusion,
                 "status": "failed" if failed else "ok",
                 "error": "ScenarioError: boom" if failed else None,
@@ -70,3 +71,13 @@ def test_report_writes_its_table_and_figures_and_never_replaces_a_foreign_folder
 
     assert main(["report", str(tmp_path / "nothing.parquet")]) == EXIT_USER_ERROR
     assert "nothing.parquet" in capsys.readouterr().err
+
+
+def test_paired_differences_match_seeds_and_skip_failed_pairs(tmp_path):
+    """truncated - clamp, seed by seed: 0.1 (s + 1) - (0.1 (s + 1) + 1) = -1 for seeds 0
+    and 1 (seed 2 failed for truncated): two pairs, a difference of exactly -1."""
+    results_table(tmp_path / "results.parquet")
+    (record,) = paired_differences(load_results(tmp_path))
+    assert record["group"] == ("hall", "truncated") and record["baseline"] == ("hall", "clamp")
+    mean, half, n = record["figures"]["rmse_position_m.fused"]
+    assert n == 2 and np.isclose(mean, -1.0) and np.isclose(half, 0.0, atol=1e-12)
