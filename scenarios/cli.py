@@ -2,6 +2,8 @@
 
     robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
     robotsim scenarios
+    robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
+    robotsim report RESULTS [--out DIR]
     robotsim reproduce NAME [options]
 
 A user's mistake (bad scenario file, impossible setting, NaN reading) prints one line
@@ -27,7 +29,9 @@ EXIT_USER_ERROR = 2
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``robotsim`` with its sub-commands."""
+    from scenarios import campaign as campaign_command
     from scenarios import commands
+    from scenarios import report as report_command
     from scenarios.reproduce import experiments
 
     parser = argparse.ArgumentParser(
@@ -42,6 +46,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     listing = sub.add_parser("scenarios", help="list the built-in scenarios")
     listing.set_defaults(handler=commands.list_scenarios)
+
+    campaign = sub.add_parser(
+        "campaign", help="run every scenario x seed x setting of a campaign file; one results table"
+    )
+    campaign_command.add_arguments(campaign)
+    campaign.set_defaults(handler=campaign_command.main)
+
+    report = sub.add_parser(
+        "report", help="aggregate a campaign's results per setting (confidence intervals, figures)"
+    )
+    report_command.add_arguments(report)
+    report.set_defaults(handler=report_command.main)
 
     reproduce = sub.add_parser("reproduce", help="reproduce a paper's experiment")
     rsub = reproduce.add_subparsers(dest="experiment", required=True, metavar="NAME")

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy import stats
 
 from robotsim.maps import point_segment_distance
 from robotsim.robot import wrap_angle
@@ -148,12 +149,14 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
 
     ``containment`` is over the epochs that produced a set (an ``inconsistent`` or ``lost``
     epoch has none; they are counted in ``empty_epochs``); the box figures are means over those epochs of the hull
-    of the outer set (``mean_width_m``: its larger position width) and of the (x, y) area of
-    the union of the outer boxes (``mean_area_m2``).
+    of the outer set (``mean_width_m``: its larger position width; ``mean_heading_width_rad``:
+    its heading width) and of the (x, y) area of the union of the outer boxes
+    (``mean_area_m2``).
     """
     has_set = epochs.has_set
     with_set = int(has_set.sum())
     hull_w = epochs.hull[has_set, :2, 1] - epochs.hull[has_set, :2, 0]
+    heading_w = epochs.hull[has_set, 2, 1] - epochs.hull[has_set, 2, 0]
     counts = {
         str(status): int(np.count_nonzero(epochs.status == code))
         for code, status in enumerate(STATUS)
@@ -165,11 +168,79 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
             "mean_width_m": float(hull_w.max(axis=1).mean()) if with_set else None,
             "mean_hull_area_m2": float(np.prod(hull_w, axis=1).mean()) if with_set else None,
             "mean_area_m2": float(epochs.area_m2[has_set].mean()) if with_set else None,
+            "mean_heading_width_rad": float(heading_w.mean()) if with_set else None,
             "mean_boxes": float(epochs.box_counts[has_set].mean()) if with_set else None,
             "max_components": int(epochs.components.max()) if len(epochs.t_s) else 0,
         },
         "q_used_max": int(epochs.q_used.max()) if len(epochs.t_s) else 0,
         "empty_epochs": counts["inconsistent"] + counts["lost"],
+        "inconsistent_epochs": counts["inconsistent"],
         "lost_epochs": counts["lost"],
         "epoch_status": counts,
     }
+
+
+#: Probability mass of the NEES band: a consistent filter's NEES falls inside it this often.
+NEES_CONFIDENCE = 0.95
+
+
+def nees(estimate: np.ndarray, cov: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Normalised estimation error squared ``(N,)`` of ``estimate (N, n)`` with covariance
+    ``cov (N, n, n)`` against ``truth (N, n)``: ``e^T P^-1 e`` with ``e = estimate - truth``
+    (Bar-Shalom, Li and Kirubarajan 2001, *Estimation with Applications to Tracking and
+    Navigation*, section 5.4). For ``n = 3`` poses the
+    heading error is wrapped to ``[-pi, pi)``.
+    """
+    error = np.asarray(estimate, dtype=np.float64) - truth
+    if error.shape[-1] == 3:
+        error[:, 2] = wrap_angle(error[:, 2])
+    solved = np.linalg.solve(cov, error[..., None])[..., 0]
+    return np.einsum("ni,ni->n", error, solved)
+
+
+def nees_band(dof: int, confidence: float = NEES_CONFIDENCE) -> tuple[float, float]:
+    """The two-sided ``confidence`` interval of one NEES sample of a consistent estimator of
+    ``dof`` states: the chi-square quantiles at ``(1 - c) / 2`` and ``(1 + c) / 2``."""
+    tail = (1.0 - confidence) / 2.0
+    return float(stats.chi2.ppf(tail, dof)), float(stats.chi2.ppf(1.0 - tail, dof))
+
+
+def nees_stats(values: np.ndarray, dof: int) -> dict[str, Any]:
+    """Mean and median of the NEES ``values (N,)`` of a ``dof``-state estimate, the band a
+    consistent estimator's samples fall in with :data:`NEES_CONFIDENCE` and the share that
+    does (about 0.95 when consistent; far less: over-confident below or pessimistic above,
+    ``share_above`` tells which). Per-sample band: successive samples are correlated, so a
+    band on the time average would claim far more confidence than the data holds."""
+    low, high = nees_band(dof)
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return {
+            "dof": dof,
+            "mean": None,
+            "median": None,
+            "band": [low, high],
+            "share_in_band": None,
+            "share_above": None,
+        }
+    return {
+        "dof": dof,
+        "mean": float(finite.mean()),
+        "median": float(np.median(finite)),
+        "band": [low, high],
+        "share_in_band": float(np.mean((finite >= low) & (finite <= high))),
+        "share_above": float(np.mean(finite > high)),
+    }
+
+
+def consistency_stats(
+    pose: np.ndarray, pose_cov: np.ndarray, truth: np.ndarray, branches: tuple[str, ...]
+) -> dict[str, Any]:
+    """NEES figures of every branch: ``pose (B, N, 3)``, ``pose_cov (B, N, 3, 3)`` against
+    ``truth (N, 3)``, for the full pose (3 states) and the position alone (2 states)."""
+    result: dict[str, Any] = {}
+    for b, name in enumerate(branches):
+        result[name] = {
+            "pose": nees_stats(nees(pose[b], pose_cov[b], truth), 3),
+            "position": nees_stats(nees(pose[b, :, :2], pose_cov[b, :, :2, :2], truth[:, :2]), 2),
+        }
+    return result

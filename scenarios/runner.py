@@ -40,7 +40,13 @@ from robotsim.simulation import KidnapEvent, SensorSuite, SimulationLog, simulat
 from robotsim.world import WorldParams
 from scenarios.epochs import EpochLog, EpochRunner
 from scenarios.errors import ScenarioError
-from scenarios.metrics import interval_stats, rmse_heading_rad, rmse_position_m, summarize
+from scenarios.metrics import (
+    consistency_stats,
+    interval_stats,
+    rmse_heading_rad,
+    rmse_position_m,
+    summarize,
+)
 from scenarios.spec import ScenarioSpec
 
 #: The two dead-reckoning branches, in batch order.
@@ -319,6 +325,7 @@ def estimation_summary(log: SimulationLog, estimation: Estimation) -> dict[str, 
         "fused_to_ukf_only_position_rmse": rmse_pos["fused"] / rmse_pos["ukf_only"]
         if rmse_pos["ukf_only"] > 0
         else None,
+        "nees": consistency_stats(estimation.pose, estimation.pose_cov, truth, BRANCHES),
         **interval_stats(estimation.epochs),
         "fusion": {
             "clamped_epochs": int(clamped.sum()),

@@ -138,6 +138,10 @@ class Table:
             raise self.error(name, f"must be one of {', '.join(map(repr, choices))}, got {value!r}")
         return value
 
+    def take_raw(self, name: str, default: Any = REQUIRED) -> Any:
+        """The value of key ``name`` as tomllib read it, whatever its type (the caller checks it)."""
+        return self._pop(name, default)[1]
+
     # -- arrays --------------------------------------------------------------------------
     def take_array(self, name: str, shape: tuple[int | None, ...], default: Any = REQUIRED) -> Any:
         """A nested array of finite numbers of ``shape`` (``None`` = any length >= 1), float64."""

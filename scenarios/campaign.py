@@ -1,0 +1,664 @@
+"""``robotsim campaign FILE``: every combination of scenarios, seeds and settings, in parallel.
+
+A campaign file (TOML) names what to run::
+
+    scenarios = ["hall", "my_building.toml"]   # built-in names or files (relative to this file)
+    seed = 2026                                # the campaign seed (default 0)
+    seeds = { first = 0, count = 20 }          # the replicates (the seed range)
+    duration_s = 60.0                          # optional: every run's duration, seconds
+
+    [grid]                                     # optional: settings overrides, every combination
+    "estimation.fusion" = ["clamp", "truncated"]
+    "estimation.tracker" = ["sivia", "imagesp"]
+
+A grid key is a key of a scenario's ``[estimation]`` table (``estimation.<key>``) or
+``run.duration_s``; the runs' seeds come from the campaign. Replicate ``i`` runs with the
+seed of child ``i`` of ``numpy.random.SeedSequence(seed).spawn``, the same for every scenario
+and every setting (common random numbers: two settings are compared on the same simulated
+worlds, which is what makes paired differences tight), and whatever worker runs it.
+
+The results folder holds one Parquet part per finished run (``parts/<run key>.parquet``,
+written under a temporary name and renamed, so a run is either wholly there or absent) and,
+once every run is done, the merged table ``results.parquet``: one row per run, the run's
+settings (``scenario``, ``replicate``, ``seed``, ``setting.<grid key>``), its ``status``
+(``ok`` or ``failed``) and ``error``, every figure of its summary as a column (nested keys
+joined by dots: ``rmse_position_m.fused``, ``nees.fused.pose.share_in_band``) and its
+``timing.*`` (wall and CPU seconds, CPU per interval epoch). A failed run is recorded with
+its error and the campaign goes on. ``--resume`` runs only the runs without a part, so a
+campaign killed at any moment (``kill -9`` included) loses at most the runs in flight.
+
+Execution: a local process pool (``--workers``, default all cores) or, with the ``[cluster]``
+extra, ``dask.distributed`` (``--cluster local`` starts a ``LocalCluster``; ``--scheduler
+tcp://HOST:PORT`` joins one). numba's kernels are compiled once in this process before any
+worker starts, so local workers load them from the disk cache instead of compiling them in
+parallel into the same cache; workers run with ``NUMBA_NUM_THREADS=1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import multiprocessing
+import os
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from intervals.errors import IntervalError
+from localization.errors import EstimationError
+from robotsim.errors import RobotsimError
+from scenarios import outputs
+from scenarios.errors import ScenarioError
+from scenarios.spec import ScenarioSpec, builtin_names, load_scenario
+from scenarios.tables import Table
+
+#: Where ``robotsim campaign`` writes when no ``--out`` is given: ``runs/<campaign stem>``.
+DEFAULT_OUT_DIR = Path("runs")
+
+PARTS_DIR = "parts"
+RESULTS_FILE = "results.parquet"
+#: The campaign's description written beside the parts; ``--resume`` requires it.
+MANIFEST_FILE = "campaign.json"
+
+#: The most runs a campaign may have (a typo in a range must not queue a billion runs).
+MAX_RUNS = 1_000_000
+
+#: The grid keys outside ``[estimation]`` a campaign may vary.
+RUN_KEYS = ("run.duration_s",)
+
+#: The duration of the short runs that compile numba's kernels before the workers start, s.
+WARM_UP_DURATION_S = 1.0
+
+#: Runs per task when the pool is local: one, so a kill loses at most the runs in flight.
+LOCAL_BATCH = 1
+#: Tasks per worker a dask campaign is cut into (fewer, larger tasks cost less to schedule).
+TASKS_PER_WORKER = 4
+MAX_DASK_BATCH = 8
+
+
+# ---------------------------------------------------------------------------------------
+# The campaign file
+# ---------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class CampaignRun:
+    """One run of a campaign: which scenario, replicate and settings, and the spec they make."""
+
+    index: int
+    """Position in the campaign's run order (scenario, replicate, grid point)."""
+    scenario: str
+    """The scenario's name (the built-in name or the file's stem)."""
+    written: str
+    """The scenario as the campaign file names it (unique within the campaign)."""
+    replicate: int
+    settings: dict[str, Any]
+    """The grid point: ``{"estimation.fusion": "clamp", ...}`` (empty without a grid)."""
+    spec: ScenarioSpec
+
+    @property
+    def key(self) -> str:
+        """A name of the run that depends on what it runs only (scenario, seed, settings,
+        duration), not on its place in the campaign: it names the run's part."""
+        described = {
+            "scenario": self.written,
+            "seed": self.spec.run.seed,
+            "duration_s": self.spec.run.duration_s,
+            "settings": self.settings,
+        }
+        return hashlib.sha256(json.dumps(described, sort_keys=True).encode()).hexdigest()[:20]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Campaign:
+    """A validated campaign file: its runs, in order."""
+
+    name: str
+    source: str
+    seed: int
+    runs: tuple[CampaignRun, ...]
+
+
+def replicate_seeds(campaign_seed: int, first: int, count: int) -> list[int]:
+    """The run seeds of replicates ``first .. first + count - 1``: one 63-bit integer from
+    each child of ``SeedSequence(campaign_seed).spawn``."""
+    children = np.random.SeedSequence(campaign_seed).spawn(first + count)[first:]
+    return [int(child.generate_state(1, np.uint64)[0] >> np.uint64(1)) for child in children]
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read and validate a campaign file; every scenario and grid point is built (and so
+    checked) here, before anything runs.
+
+    Raises:
+        ScenarioError: ``(file, key, reason)`` for the first mistake.
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise ScenarioError(source, None, "no such file" if not path.exists() else "not a file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(source, None, f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ScenarioError(source, None, "not a UTF-8 text file") from None
+    top = Table(source, "", data)
+    names = _take_strings(top, "scenarios")
+    seed = top.take_int("seed", 0, minimum=0)
+    seeds = top.take_table("seeds")
+    first = seeds.take_int("first", 0, minimum=0)
+    count = seeds.take_int("count", minimum=1)
+    seeds.finish()
+    duration_s = top.take_float("duration_s", None, above=0.0)
+    grid = _read_grid(source, top.take_raw("grid", {}))
+    top.finish()
+
+    total = len(names) * count * math.prod(len(v) for v in grid.values())
+    if total > MAX_RUNS:
+        raise ScenarioError(source, "seeds.count", f"{total} runs, more than {MAX_RUNS}")
+    base_dir = path.parent
+    specs = []
+    for i, name in enumerate(names):
+        scenario = _load_named(name, base_dir, source, f"scenarios[{i}]")
+        if duration_s is not None:
+            scenario = _apply(scenario, "run.duration_s", duration_s, source, "duration_s")
+        specs.append(scenario)
+
+    run_seeds = replicate_seeds(seed, first, count)
+    points = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
+    runs: list[CampaignRun] = []
+    for written, spec_base in zip(names, specs, strict=True):
+        for replicate, run_seed in zip(range(first, first + count), run_seeds, strict=True):
+            seeded = spec_base.with_run(seed=run_seed)
+            for point in points:
+                spec = seeded
+                for key, value in point.items():
+                    spec = _apply(spec, key, value, source, f"grid.{key}")
+                runs.append(
+                    CampaignRun(
+                        index=len(runs),
+                        scenario=spec_base.name,
+                        written=written,
+                        replicate=replicate,
+                        settings=point,
+                        spec=spec,
+                    )
+                )
+    return Campaign(path.stem, source, seed, tuple(runs))
+
+
+def _take_strings(table: Table, name: str) -> list[str]:
+    """A required non-empty array of strings."""
+    value = table.take_raw(name)
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        raise table.error(name, "must be a non-empty array of strings")
+    if len(set(value)) != len(value):
+        raise table.error(name, "lists a scenario twice")
+    return list(value)
+
+
+def _read_grid(source: str, data: object) -> dict[str, list[Any]]:
+    """The ``[grid]`` table: each key an ``estimation.<key>`` or a :data:`RUN_KEYS` key
+    (quoted, ``"estimation.fusion" = [...]``, or as sub-tables, ``estimation.fusion = [...]``),
+    each value a non-empty array of distinct values to try."""
+    if not isinstance(data, dict):
+        raise ScenarioError(source, "grid", "must be a table")
+    grid: dict[str, list[Any]] = {}
+    for key, values in flatten_tables(data).items():
+        where = f"grid.{key}"
+        if key == "run.seed":
+            raise ScenarioError(source, where, "the seeds come from the campaign (seed, seeds)")
+        if not (key.startswith("estimation.") or key in RUN_KEYS):
+            raise ScenarioError(
+                source,
+                where,
+                f"not a setting a campaign can vary (estimation.<key> or {', '.join(RUN_KEYS)})",
+            )
+        if not isinstance(values, list) or not values:
+            raise ScenarioError(source, where, "must be a non-empty array of the values to try")
+        if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+            raise ScenarioError(source, where, "lists a value twice")
+        grid[key] = values
+    return grid
+
+
+def flatten_tables(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested TOML tables as dotted keys (``{"a": {"b": 1}}`` -> ``{"a.b": 1}``)."""
+    flat: dict[str, Any] = {}
+    for key, value in data.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict):
+            flat.update(flatten_tables(value, name))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _load_named(name: str, base_dir: Path, source: str, key: str) -> ScenarioSpec:
+    """A built-in scenario, or a scenario file relative to the campaign file's folder."""
+    if name in builtin_names():
+        return load_scenario(name)
+    path = Path(name)
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise ScenarioError(
+            source,
+            key,
+            f"{name!r} is neither a built-in scenario ({', '.join(builtin_names())}) nor a file",
+        )
+    return load_scenario(path)
+
+
+def _apply(spec: ScenarioSpec, key: str, value: Any, source: str, where: str) -> ScenarioSpec:
+    """``spec`` with the setting ``key`` (``estimation.<key>``, ``run.duration_s``) set to
+    ``value``; a refusal is reported against the campaign file and ``where``."""
+    try:
+        if key == "run.duration_s":
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ScenarioError(None, None, f"must be a number, got {value!r}")
+            return spec.with_run(duration_s=float(value))
+        return spec.with_estimation(**{key.removeprefix("estimation."): value})
+    except (ScenarioError, IntervalError, EstimationError, RobotsimError) as exc:
+        reason = exc.reason if isinstance(exc, ScenarioError) else str(exc)
+        raise ScenarioError(source, where, f"{value!r}: {reason}") from None
+
+
+# ---------------------------------------------------------------------------------------
+# One run, one row
+# ---------------------------------------------------------------------------------------
+#: Set in every worker before it imports numba: one thread per worker process (the pool is
+#: the parallelism; BLAS threads on top of it would only compete for the same cores).
+WORKER_ENVIRONMENT = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
+def flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested summary as flat columns: dict keys and list positions joined by dots
+    (``{"a": {"b": [1, 2]}}`` -> ``{"a.b.0": 1, "a.b.1": 2}``)."""
+    if isinstance(tree, dict):
+        items: Iterable[tuple[Any, Any]] = tree.items()
+    elif isinstance(tree, list | tuple):
+        items = enumerate(tree)
+    else:
+        return {prefix: tree}
+    columns: dict[str, Any] = {}
+    for name, value in items:
+        columns.update(flatten(value, f"{prefix}.{name}" if prefix else str(name)))
+    return columns
+
+
+def run_columns(run: CampaignRun) -> dict[str, Any]:
+    """The columns that say which run a row is (the same for a failed run)."""
+    return {
+        "run_index": run.index,
+        "run_key": run.key,
+        "scenario": run.scenario,
+        "replicate": run.replicate,
+        "seed": run.spec.run.seed,
+        "duration_s": run.spec.run.duration_s,
+        **{f"setting.{key}": value for key, value in run.settings.items()},
+    }
+
+
+def run_one(run: CampaignRun) -> dict[str, Any]:
+    """Run ``run`` with ``scenarios.runner.run_scenario``; its row: the run's columns, its
+    ``status`` and ``error``, its flattened summary and its ``timing.*`` (wall and CPU
+    seconds, CPU milliseconds per interval epoch, simulated seconds per wall second)."""
+    from scenarios.runner import run_scenario
+
+    row = run_columns(run)
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
+    try:
+        result = run_scenario(run.spec)
+    except Exception as exc:  # any failure of one run is recorded; the campaign goes on
+        return {**row, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+    wall_s = time.perf_counter() - wall_start
+    cpu_s = time.process_time() - cpu_start
+    epochs = result.summary.get("epochs") or 0
+    return {
+        **row,
+        "status": "ok",
+        "error": None,
+        **flatten(result.summary),
+        "timing.wall_s": wall_s,
+        "timing.cpu_s": cpu_s,
+        "timing.cpu_per_epoch_ms": cpu_s / epochs * 1e3 if epochs else None,
+        "timing.realtime_factor": run.spec.run.duration_s / wall_s if wall_s > 0 else None,
+    }
+
+
+def run_batch(runs: Sequence[CampaignRun]) -> list[dict[str, Any]]:
+    """The rows of ``runs``, run one after the other (a task of the pool or of dask)."""
+    for name, value in WORKER_ENVIRONMENT.items():
+        os.environ.setdefault(name, value)  # in effect where numba is not imported yet
+    return [run_one(run) for run in runs]
+
+
+# ---------------------------------------------------------------------------------------
+# The results folder
+# ---------------------------------------------------------------------------------------
+class ResultsFolder:
+    """``OUT/parts/<run key>.parquet`` (one per finished run), ``OUT/campaign.json``, and
+    ``OUT/results.parquet`` (all rows, in run order) once every run is done."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.parts = path / PARTS_DIR
+
+    def prepare(self, campaign: Campaign, resume: bool) -> None:
+        """Check the folder can take this campaign; without ``resume`` it must be new or
+        empty, with it new or a campaign folder. Leftover temporary parts of a killed run
+        are removed (they are this folder's own, never a finished run)."""
+        manifest = self.path / MANIFEST_FILE
+        if self.path.exists() and not self.path.is_dir():
+            raise ScenarioError(None, "--out", f"{self.path} exists and is not a folder")
+        exists = self.path.is_dir() and any(self.path.iterdir())
+        if exists and not resume:
+            raise ScenarioError(
+                None, "--out", f"{self.path} is not empty (--resume continues a campaign there)"
+            )
+        if exists and not manifest.is_file():
+            raise ScenarioError(None, "--out", f"{self.path} holds no campaign ({MANIFEST_FILE})")
+        reason = outputs.check_destination(manifest)
+        if reason is not None:
+            raise ScenarioError(None, "--out", reason)
+        self.parts.mkdir(parents=True, exist_ok=True)
+        for leftover in self.parts.glob(".*.part"):
+            leftover.unlink()
+        if not manifest.is_file():
+            outputs.write_json(
+                manifest,
+                {"campaign": campaign.source, "seed": campaign.seed, "runs": len(campaign.runs)},
+            )
+
+    def done_keys(self) -> set[str]:
+        """The keys of the runs with a part."""
+        return {part.name[: -len(".parquet")] for part in self.parts.glob("*.parquet")}
+
+    def commit(self, row: dict[str, Any]) -> None:
+        """Write one run's row as its part, atomically (a temporary name, then a rename)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        with outputs.atomic_path(self.parts / f"{row['run_key']}.parquet") as tmp:
+            pq.write_table(pa.Table.from_pylist([row]), tmp)
+
+    def merge(self, campaign: Campaign) -> Path:
+        """``results.parquet``: the rows of the campaign's runs, in run order (columns a run
+        lacks, a failed run's figures, are null)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        tables = [pq.read_table(self.parts / f"{run.key}.parquet") for run in campaign.runs]
+        merged = pa.concat_tables(tables, promote_options="permissive")
+        destination = self.path / RESULTS_FILE
+        with outputs.atomic_path(destination) as tmp:
+            pq.write_table(merged, tmp)
+        return destination
+
+
+# ---------------------------------------------------------------------------------------
+# Executors
+# ---------------------------------------------------------------------------------------
+#: What an executor is given: the batches to run and what to do with each finished batch.
+RowsSink = Callable[[list[dict[str, Any]]], None]
+
+
+@contextlib.contextmanager
+def worker_environment() -> Iterator[None]:
+    """:data:`WORKER_ENVIRONMENT` in this process's environment while workers start (they
+    inherit it), then the previous values back."""
+    previous = {name: os.environ.get(name) for name in WORKER_ENVIRONMENT}
+    os.environ.update(WORKER_ENVIRONMENT)
+    try:
+        yield
+    finally:
+        for name, value in previous.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def execute_local(batches: list[list[CampaignRun]], workers: int, sink: RowsSink) -> None:
+    """Run the batches on a pool of ``workers`` fresh (spawned) processes."""
+    context = multiprocessing.get_context("spawn")
+    with worker_environment(), ProcessPoolExecutor(workers, mp_context=context) as pool:
+        pending: set[Future[list[dict[str, Any]]]] = {
+            pool.submit(run_batch, batch) for batch in batches
+        }
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    sink(future.result())
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def execute_dask(
+    batches: list[list[CampaignRun]], scheduler: str | None, workers: int, sink: RowsSink
+) -> None:
+    """Run the batches on dask.distributed: the scheduler at ``scheduler``
+    (``tcp://HOST:PORT``), or a ``LocalCluster`` of ``workers`` processes when None."""
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise ScenarioError(
+            None,
+            "--scheduler" if scheduler else "--cluster",
+            "dask.distributed is not installed (pip install 'robotsim-testbed[cluster]')",
+        ) from None
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            stack.enter_context(worker_environment())
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                )
+            )
+            client = stack.enter_context(Client(cluster))
+        else:
+            try:
+                client = stack.enter_context(Client(scheduler, timeout=30))
+            except OSError as exc:
+                raise ScenarioError(
+                    None, "--scheduler", f"cannot reach {scheduler}: {exc}"
+                ) from None
+        futures = client.map(run_batch, batches, pure=False)
+        for future in as_completed(futures):
+            sink(future.result())
+
+
+def batched(runs: Sequence[CampaignRun], size: int) -> list[list[CampaignRun]]:
+    """``runs`` cut into consecutive batches of ``size`` (the last one shorter)."""
+    return [list(runs[i : i + size]) for i in range(0, len(runs), size)]
+
+
+def warm_up(runs: Sequence[CampaignRun]) -> None:
+    """Compile numba's kernels here, once, before any worker starts: one short run per
+    distinct ``[estimation]`` setting of the campaign (each may use other kernels); the
+    workers then load them from the disk cache."""
+    from scenarios.runner import run_scenario
+
+    seen: set[str] = set()
+    for run in runs:
+        estimation = json.dumps(run.spec.estimation.as_keys(), sort_keys=True, default=str)
+        if estimation in seen:
+            continue
+        seen.add(estimation)
+        short = min(WARM_UP_DURATION_S, run.spec.run.duration_s)
+        with contextlib.suppress(Exception):  # a run that fails will fail (and be recorded) later
+            run_scenario(run.spec.with_run(duration_s=short))
+
+
+# ---------------------------------------------------------------------------------------
+# Progress
+# ---------------------------------------------------------------------------------------
+class CampaignProgress:
+    """``campaign NAME: done/total runs, F failed, ETA`` on ``stream``: redrawn in place on a
+    terminal, one line per tenth of the campaign otherwise."""
+
+    def __init__(self, stream: TextIO, name: str, total: int, done: int):
+        self._stream, self._name = stream, name
+        self._total, self._done, self._at_start = total, done, done
+        self._failed = 0
+        self._start = time.perf_counter()
+        self._tty = stream.isatty()
+        self._shown_tenth = -1
+        self._closed = False
+        self.update([])
+
+    def update(self, rows: list[dict[str, Any]]) -> None:
+        """Count the finished ``rows`` and redraw."""
+        self._done += len(rows)
+        self._failed += sum(row["status"] != "ok" for row in rows)
+        ran = self._done - self._at_start
+        remaining = self._total - self._done
+        elapsed = time.perf_counter() - self._start
+        eta = _duration(elapsed / ran * remaining) if ran else "?"
+        line = (
+            f"campaign {self._name}: {self._done}/{self._total} runs, {self._failed} failed, "
+            f"ETA {eta}"
+        )
+        if self._tty:
+            self._stream.write(f"\r{line}\033[K")
+        else:
+            tenth = 10 * self._done // max(self._total, 1)
+            if tenth == self._shown_tenth:
+                return
+            self._shown_tenth = tenth
+            self._stream.write(line + "\n")
+        self._stream.flush()
+
+    def close(self) -> None:
+        """End the bar's line on a terminal (once)."""
+        if self._tty and not self._closed:
+            self._stream.write("\n")
+            self._stream.flush()
+        self._closed = True
+
+
+def _duration(seconds: float) -> str:
+    seconds = round(seconds)
+    if seconds < 60:
+        return f"{seconds}s"
+    minutes, seconds = divmod(seconds, 60)
+    if minutes < 60:
+        return f"{minutes}m{seconds:02d}s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m"
+
+
+# ---------------------------------------------------------------------------------------
+# The sub-command
+# ---------------------------------------------------------------------------------------
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``robotsim campaign``."""
+    parser.add_argument("campaign", metavar="FILE", type=Path, help="the campaign file (TOML)")
+    parser.add_argument(
+        "--out", type=Path, metavar="DIR", help="results folder (default: runs/<campaign stem>)"
+    )
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the campaign in --out: run what is missing"
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes (default: every core of this machine)",
+    )
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on a dask.distributed scheduler (tcp://HOST:PORT)",
+    )
+    where.add_argument(
+        "--cluster",
+        choices=("local",),
+        help="run on a dask LocalCluster of --workers processes started here",
+    )
+    parser.add_argument(
+        "--batch", type=int, metavar="N", help="runs per task (default: 1 locally; a few on dask)"
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    """``robotsim campaign``: run what is missing, merge the table; exit 1 if a run failed."""
+    campaign = load_campaign(args.campaign)
+    for option, value in (("--workers", args.workers), ("--batch", args.batch)):
+        if value is not None and value < 1:
+            raise ScenarioError(None, option, f"must be at least 1, got {value}")
+    folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
+    folder.prepare(campaign, args.resume)
+    done = folder.done_keys()
+    missing = [run for run in campaign.runs if run.key not in done]
+    workers = args.workers or os.cpu_count() or 1
+    on_dask = args.scheduler is not None or args.cluster is not None
+    batch = args.batch or (
+        min(MAX_DASK_BATCH, max(1, math.ceil(len(missing) / (TASKS_PER_WORKER * workers))))
+        if on_dask
+        else LOCAL_BATCH
+    )
+    total = len(campaign.runs)
+    print(
+        f"campaign {campaign.name}: {total} runs, {total - len(missing)} already done, "
+        f"{len(missing)} to run on {workers} worker(s)",
+        file=sys.stderr,
+    )
+    progress = CampaignProgress(sys.stderr, campaign.name, total, total - len(missing))
+
+    def sink(rows: list[dict[str, Any]]) -> None:
+        for row in rows:
+            folder.commit(row)
+        progress.update(rows)
+
+    try:
+        if missing:
+            if args.scheduler is None:
+                warm_up(missing)
+            batches = batched(missing, batch)
+            if on_dask:
+                execute_dask(batches, args.scheduler, workers, sink)
+            else:
+                execute_local(batches, workers, sink)
+    except BrokenProcessPool:
+        # a worker process died (out of memory, killed): the runs it had are not recorded as
+        # failures, since they did not fail on their own; they stay missing for --resume
+        progress.close()
+        left = len(campaign.runs) - len(folder.done_keys())
+        print(
+            f"robotsim: a worker process died; {left} run(s) not done: "
+            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        progress.close()
+    results = folder.merge(campaign)
+    failed = _failed_count(results)
+    print(f"campaign {campaign.name}: {total} runs, {failed} failed; wrote {results}")
+    return 1 if failed else 0
+
+
+def _failed_count(results: Path) -> int:
+    import pyarrow.parquet as pq
+
+    status = pq.read_table(results, columns=["status"]).column("status").to_pylist()
+    return sum(value != "ok" for value in status)
