@@ -12,8 +12,9 @@ How it reads (the default blueprint, :func:`default_blueprint`):
 - one ``AnnotationContext`` on ``world`` names and colours every kind of thing drawn
   (:data:`CLASSES`); the entities carry class ids, and a legend of the classes drawn sits
   under the map (``world/legend``);
-- the truth and both estimates draw a **trail up to the time cursor**; their whole paths are
-  a faint layer, hidden by default (tick it in the blueprint panel);
+- the truth and both estimates draw a **trail up to the time cursor** (the last
+  :data:`TRAIL_WINDOW_S` seconds); their whole paths are a faint layer, hidden by default
+  (tick it in the blueprint panel);
 - line widths are in screen units (ui points), so thin lines stay thin when zoomed;
 - the fused branch's outline is honest about the fusion rule: under the paper's clamp the
   covariance is never updated (``localization.fusion``: the clamp moves the mean only), so
@@ -31,7 +32,7 @@ Entity paths (the tests read them back):
 - ``world/legend``: one labelled point per class drawn, static ``Points2D``;
 - ``world/robot/path``: the whole true trajectory, static faint ``LineStrips2D``;
 - ``world/robot/trail``: one segment per ``TRAIL_STRIDE`` samples, ``LineStrips2D``, shown
-  from the start up to the cursor;
+  for the last ``TRAIL_WINDOW_S`` seconds up to the cursor;
 - ``world/robot/footprint``: the true position with the footprint disk, ``Ellipses2D`` (N rows);
 - ``world/robot/heading``: an arrow along the true heading, ``Arrows2D`` (N rows);
 - ``world/sonar/cones``: each sensor's cone at each scan, out to the reading (or to ``d_max``
@@ -230,11 +231,15 @@ MAP_MARGIN_M = 0.5
 LEGEND_ROW_M = 0.45
 #: Columns of the legend under the map.
 LEGEND_COLUMNS = 4
+#: The epoch-time plot's axis reaches this many times the 95th percentile of the epoch times.
+EPOCH_AXIS_FACTOR = 2.0
 #: The status plot's fixed axis: q from -1 (no set), the status up to 3 (lost).
 STATUS_AXIS = (-1.5, len(STATUS) - 0.5)
 #: How the viewer opens: "following" puts the cursor at the end of the recording (the whole
 #: trails, the last set) without playing; live, it follows the data as it arrives.
 PLAY_STATE = rrb.components.PlayState.Following
+#: The trails show this many seconds before the cursor.
+TRAIL_WINDOW_S = 60.0
 #: The raw-sensor plots show this many seconds before the cursor.
 RAW_WINDOW_S = 30.0
 
@@ -279,7 +284,7 @@ def write_recording(
     """Write the recording of ``log`` (a run of ``spec``) and of its ``estimation`` (if any)
     to the ``.rrd`` file ``path``."""
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
-    rec.save(path, default_blueprint=default_blueprint(spec.map.bounds))
+    rec.save(path, default_blueprint=default_blueprint(spec.map.bounds, epoch_axis(estimation)))
     record_all(rec, spec, log, estimation)
     rec.flush()
     rec.disconnect()
@@ -297,7 +302,7 @@ def stream_recording(
     (``spawn``: rerun's viewer started and connected to) or a running one at ``connect_url``
     (a ``rerun+http://host:port/proxy`` URL, see :func:`viewer_url`)."""
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
-    blueprint = default_blueprint(spec.map.bounds)
+    blueprint = default_blueprint(spec.map.bounds, epoch_axis(estimation))
     if spawn:
         rec.spawn(default_blueprint=blueprint)
     else:
@@ -338,18 +343,33 @@ def map_view_bounds(bounds: np.ndarray) -> tuple[tuple[float, float], tuple[floa
     return (x0 - MAP_MARGIN_M, x1 + MAP_MARGIN_M), (-(y1 + MAP_MARGIN_M), -bottom)
 
 
-def default_blueprint(bounds: np.ndarray) -> rrb.Blueprint:
-    """The map (y up, fixed to the map ``bounds (2, 2)``) beside two tabs of plots: the
-    localisation figures grouped by unit, and the raw sensors."""
+def epoch_axis(estimation: Estimation | None) -> tuple[float, float] | None:
+    """The epoch-time plot's axis, ms: up to ``EPOCH_AXIS_FACTOR`` times the 95th percentile
+    of the epoch times, so that a few slow epochs (the global localisation) do not flatten
+    the others; ``None`` (the viewer's own) without epochs or when nothing would be clipped."""
+    if estimation is None or len(estimation.epochs.elapsed_s) == 0:
+        return None
+    epoch_ms = estimation.epochs.elapsed_s * 1e3
+    top = EPOCH_AXIS_FACTOR * float(np.percentile(epoch_ms, 95))
+    return (0.0, top) if epoch_ms.max() > top > 0 else None
+
+
+def default_blueprint(
+    bounds: np.ndarray, epoch_ms_range: tuple[float, float] | None = None
+) -> rrb.Blueprint:
+    """The map (y up, fixed to the map ``bounds (2, 2)``) beside tabs of plots: the
+    localisation figures grouped by unit (the epoch time on ``epoch_ms_range``, see
+    :func:`epoch_axis`), the raw sensors, and the notes."""
     x_range, y_range = map_view_bounds(bounds)
-    to_cursor = rrb.VisibleTimeRanges(
+    cursor = rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)
+    trail_window = rrb.VisibleTimeRanges(
         timeline=TIMELINE,
-        start=rrb.TimeRangeBoundary.infinite(),
-        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0),
+        start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRAIL_WINDOW_S),
+        end=cursor,
     )
     trails = [f"{WORLD}/robot/trail"] + [f"{WORLD}/estimates/{b}/trail" for b in BRANCHES]
     paths = [f"{WORLD}/robot/path"] + [f"{WORLD}/estimates/{b}/path" for b in BRANCHES]
-    overrides: dict = dict.fromkeys(trails, to_cursor)
+    overrides: dict = dict.fromkeys(trails, trail_window)
     overrides.update({path: rrb.EntityBehavior(visible=False) for path in paths})
     map_view = rrb.Spatial2DView(
         origin=VIEW_ROOT,
@@ -363,16 +383,21 @@ def default_blueprint(bounds: np.ndarray) -> rrb.Blueprint:
             for archetype in (rr.Points2D, rr.LineStrips2D, rr.Boxes2D, rr.Ellipses2D, rr.Arrows2D)
         ],
     )
-    raw_window = rrb.VisibleTimeRanges(
-        timeline=TIMELINE,
-        start=rrb.TimeRangeBoundary.cursor_relative(seconds=-RAW_WINDOW_S),
-        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0),
+    # the localisation plots show the whole run; the raw sensors a window before the cursor
+    whole_run = rrb.TimeAxis(
+        link="Independent",
+        view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+        ),
     )
+    raw_start = rrb.TimeRangeBoundary.cursor_relative(seconds=-RAW_WINDOW_S)
+    raw_window = rrb.VisibleTimeRanges(timeline=TIMELINE, start=raw_start, end=cursor)
+    raw_axis = rrb.TimeAxis(link="Independent", view_range=rrb.TimeRange(raw_start, cursor))
 
     def plot(
         name: str,
         *contents: str,
-        window: rrb.VisibleTimeRanges | None = None,
+        raw: bool = False,
         y_range: tuple[float, float] | None = None,
     ) -> rrb.TimeSeriesView:
         return rrb.TimeSeriesView(
@@ -380,7 +405,8 @@ def default_blueprint(bounds: np.ndarray) -> rrb.Blueprint:
             contents=list(contents),
             name=name,
             plot_legend=rrb.PlotLegend(corner="LeftTop"),
-            time_ranges=window,
+            time_ranges=raw_window if raw else None,
+            axis_x=raw_axis if raw else whole_run,
             axis_y=rrb.ScalarAxis(range=y_range) if y_range else None,
         )
 
@@ -389,7 +415,13 @@ def default_blueprint(bounds: np.ndarray) -> rrb.Blueprint:
         plot("heading error (rad)", "/errors/heading_rad/**"),
         plot("interval set width (m)", "/intervals/box_width_m"),
         plot("interval set area (m²)", "/intervals/area_m2"),
-        plot("interval epoch time (ms)", "/intervals/epoch_ms"),
+        plot(
+            "interval epoch time (ms)"
+            if epoch_ms_range is None
+            else "interval epoch time (ms; slower epochs off the scale)",
+            "/intervals/epoch_ms",
+            y_range=epoch_ms_range,
+        ),
         plot(
             "epoch status and outliers q (steps)",
             "/intervals/status",
@@ -399,11 +431,11 @@ def default_blueprint(bounds: np.ndarray) -> rrb.Blueprint:
         name="localisation",
     )
     raw = rrb.Vertical(
-        plot("encoders (ticks per sample)", "/sensors/encoders/**", window=raw_window),
-        plot("gyro (rad/s)", "/sensors/gyro/**", window=raw_window),
-        plot("accelerometer (m/s²)", "/sensors/accelerometer/**", window=raw_window),
-        plot("true speed (m/s)", "/truth/v_m_s", window=raw_window),
-        plot("true turn rate (rad/s)", "/truth/omega_rad_s", window=raw_window),
+        plot("encoders (ticks per sample)", "/sensors/encoders/**", raw=True),
+        plot("gyro (rad/s)", "/sensors/gyro/**", raw=True),
+        plot("accelerometer (m/s²)", "/sensors/accelerometer/**", raw=True),
+        plot("true speed (m/s)", "/truth/v_m_s", raw=True),
+        plot("true turn rate (rad/s)", "/truth/omega_rad_s", raw=True),
         name="raw sensors",
     )
     return rrb.Blueprint(
@@ -475,8 +507,9 @@ def legend_notes(shown: list[DrawClass]) -> str:
         "# How to read this recording",
         "",
         "The map is drawn **y up** (as the project's figures), in metres. The truth and both "
-        "estimates draw a trail up to the time cursor; their whole paths are a faint layer, "
-        "hidden by default (show `*/path` in the blueprint panel).",
+        f"estimates draw a trail of the last {TRAIL_WINDOW_S:g} s up to the time cursor; their "
+        "whole paths are a faint layer, hidden by default (show `*/path` in the blueprint "
+        "panel).",
         "",
         *(f"- **{c.label}** ({c.color_name}): {c.meaning}." for c in shown),
         "",
@@ -520,7 +553,7 @@ def record_path(
 ) -> None:
     """The whole path ``xy (N, 2)`` (static, faint) under ``base/path``, and its trail under
     ``base/trail``: the segment from the previous ``TRAIL_STRIDE``-th sample to each one,
-    at its time (the blueprint shows them from the start up to the cursor)."""
+    at its time (the blueprint shows the last ``TRAIL_WINDOW_S`` seconds of them)."""
     rec.log(
         f"{base}/path",
         rr.LineStrips2D(
@@ -891,13 +924,14 @@ def component_hulls(epochs: EpochLog) -> tuple[np.ndarray, np.ndarray]:
     ``hulls (H, 2, 2)`` (``x, y`` rows; lower, upper) in epoch order, and the number of
     components per epoch ``(E,)`` (0 without a set)."""
     epoch = np.repeat(np.arange(len(epochs.t_s)), epochs.box_counts)  # (B,)
-    keys, member = np.unique(np.stack([epoch, epochs.labels]), axis=1, return_inverse=True)
-    member = member.reshape(-1)
-    lower = np.full((keys.shape[1], 2), np.inf)
-    upper = np.full((keys.shape[1], 2), -np.inf)
+    labels = epochs.labels.astype(np.int64)
+    span = int(labels.max()) + 1 if len(labels) else 1
+    keys, member = np.unique(epoch * span + labels, return_inverse=True)  # sorted by epoch
+    lower = np.full((len(keys), 2), np.inf)
+    upper = np.full((len(keys), 2), -np.inf)
     np.minimum.at(lower, member, epochs.boxes[:, :2, 0])
     np.maximum.at(upper, member, epochs.boxes[:, :2, 1])
-    counts = np.bincount(keys[0], minlength=len(epochs.t_s))
+    counts = np.bincount(keys // span, minlength=len(epochs.t_s))
     return np.stack([lower, upper], axis=-1), counts
 
 

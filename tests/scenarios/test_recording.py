@@ -336,6 +336,7 @@ def blueprint_views(path) -> dict[str, dict]:
             "contents": data[f"{entity}/ViewContents"]["ViewContents:query"][-1],
             "bounds": (bounds["x_range"], bounds["y_range"]) if bounds else None,
             "time_ranges": value("VisibleTimeRanges", "VisibleTimeRanges:ranges"),
+            "time_axis": value("TimeAxis", "TimeAxis:view_range"),
             "overrides": overrides,
         }
     return views
@@ -351,7 +352,7 @@ def time_panel(path) -> dict:
 
 
 def test_the_blueprint_has_the_map_the_plots_by_unit_and_the_raw_sensors(clamp_run):
-    from scenarios.recording import RAW_WINDOW_S
+    from scenarios.recording import RAW_WINDOW_S, TRAIL_WINDOW_S
 
     _, _, path = clamp_run
     views = blueprint_views(path)
@@ -371,12 +372,12 @@ def test_the_blueprint_has_the_map_the_plots_by_unit_and_the_raw_sensors(clamp_r
     assert {v["contents"][0].split("/")[1] for v in raw} == {"sensors", "truth"} and len(raw) == 5
     for view in plots.values():
         if view in raw:
-            assert view["time_ranges"] == {
-                "timeline": "time",
-                "range": {"start": -round(RAW_WINDOW_S * 1e9), "end": 0},
-            }
+            window = {"start": -round(RAW_WINDOW_S * 1e9), "end": 0}
+            assert view["time_ranges"] == {"timeline": "time", "range": window}
+            assert view["time_axis"] == window  # the axis follows the window
         else:
             assert view["time_ranges"] is None
+            assert view["time_axis"] == {"start": None, "end": None}  # the whole run
     (notes,) = [v for v in views.values() if v["class"] == "TextDocument"]
     assert notes["origin"] == "notes/legend"
     (map_view,) = [v for v in views.values() if v["class"] == "2D"]
@@ -388,12 +389,33 @@ def test_the_blueprint_has_the_map_the_plots_by_unit_and_the_raw_sensors(clamp_r
     }
     paths = {t.replace("trail", "path") for t in trails}
     assert set(overrides) == trails | paths
-    for trail in trails:  # from the start up to the cursor
+    for trail in trails:  # a window up to the cursor
         assert overrides[trail]["VisibleTimeRanges:ranges"] == [
-            [{"timeline": "time", "range": {"start": None, "end": 0}}]
+            [{"timeline": "time", "range": {"start": -round(TRAIL_WINDOW_S * 1e9), "end": 0}}]
         ]
     for whole in paths:  # the optional faint layer, off by default
         assert overrides[whole]["EntityBehavior:visible"] == [[False]]
+
+
+def test_the_epoch_time_axis_clips_only_the_slow_epochs():
+    from types import SimpleNamespace
+
+    from scenarios.recording import EPOCH_AXIS_FACTOR, epoch_axis
+
+    def estimation(epoch_ms):
+        epochs = SimpleNamespace(elapsed_s=np.asarray(epoch_ms, dtype=float) * 1e-3)
+        return SimpleNamespace(epochs=epochs)
+
+    typical = np.r_[np.full(99, 4.0), 5.0]
+    assert epoch_axis(estimation(typical)) is None  # nothing off the scale
+    axis = epoch_axis(estimation(np.r_[9000.0, typical]))  # a slow global epoch
+    assert axis is not None
+    bottom, top = axis
+    assert bottom == 0.0 and top == pytest.approx(
+        EPOCH_AXIS_FACTOR * np.percentile(np.r_[9000.0, typical], 95)
+    )
+    assert 5.0 < top < 9000.0
+    assert epoch_axis(None) is None and epoch_axis(estimation([])) is None
 
 
 def outline_rows(data: dict, branch: str):
@@ -568,7 +590,7 @@ def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
     def rows(path) -> dict:
         counts: dict = {}
         for (entity, static), columns in entity_columns(path).items():
-            first = next(iter(columns.values()), [])
+            first: list = next(iter(columns.values()), [])
             counts[(entity, static)] = len(first)
         return counts
 
