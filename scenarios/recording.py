@@ -328,7 +328,7 @@ def record_all(
 ) -> None:
     """Everything the recording holds, sent to ``rec``: the frame and the classes, the run,
     and the estimation (if any)."""
-    record_frame(rec, spec.map.bounds, with_estimation=estimation is not None)
+    record_frame(rec, spec.map.bounds, spec.estimation.fusion if estimation is not None else None)
     record_run(rec, spec, log)
     if estimation is not None:
         record_estimation(rec, spec, log, estimation)
@@ -338,7 +338,7 @@ def map_view_bounds(bounds: np.ndarray) -> tuple[tuple[float, float], tuple[floa
     """The map view's fixed ``x_range, y_range`` in the view's (y-down) frame: the map
     ``bounds [[xmin, xmax], [ymin, ymax]]`` metres with a margin, and the legend under it."""
     (x0, x1), (y0, y1) = np.asarray(bounds, dtype=float)
-    legend_rows = -(-len(legend_classes(True)) // LEGEND_COLUMNS)
+    legend_rows = -(-len(legend_classes("clamp")) // LEGEND_COLUMNS)  # the longest legend
     bottom = y0 - MAP_MARGIN_M - (legend_rows + 1) * LEGEND_ROW_M
     return (x0 - MAP_MARGIN_M, x1 + MAP_MARGIN_M), (-(y1 + MAP_MARGIN_M), -bottom)
 
@@ -455,15 +455,17 @@ def default_blueprint(
     )
 
 
-def legend_classes(with_estimation: bool) -> list[DrawClass]:
-    """The classes the legend lists: everything drawn (the MCL slot only when it is drawn)."""
+def legend_classes(fusion_rule: str | None) -> list[DrawClass]:
+    """The classes the legend lists: everything drawn in a run with the estimation's
+    ``fusion_rule`` (``None``: no estimation); the MCL slot only when it is drawn."""
     drawn = ["truth", "wall", "cone_echo", "cone_no_echo", "echo"]
-    if with_estimation:
-        drawn += ["ukf_only", "fused", "fused_box", "outer_box", "inner_box", "hull"]
+    if fusion_rule is not None:
+        drawn += ["ukf_only", "fused", "outer_box", "inner_box", "hull"]
+        drawn.append(fused_outline_class(fusion_rule))
     return [CLASSES[name] for name in CLASSES if name in drawn]
 
 
-def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, with_estimation: bool) -> None:
+def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str | None) -> None:
     """The y-up transform and the annotation context on ``world``, the legend under the map
     ``bounds (2, 2)`` (:data:`LEGEND_COLUMNS` columns of labelled points) and the notes that
     explain it, static."""
@@ -475,7 +477,7 @@ def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, with_estimation: b
         ),
         static=True,
     )
-    shown = legend_classes(with_estimation)
+    shown = legend_classes(fusion_rule)
     (x0, x1), (y0, _) = np.asarray(bounds, dtype=float)
     column, row = np.divmod(np.arange(len(shown)), LEGEND_COLUMNS)[::-1]
     positions = np.stack(

@@ -469,8 +469,11 @@ def test_the_fused_ellipse_under_truncation_is_the_covariance_it_leaves(truncate
 
     _, result, path = truncated_run
     est = result.estimation
-    strips, ids, _ = outline_rows(entity_columns(path), "fused")
+    data = entity_columns(path)
+    strips, ids, _ = outline_rows(data, "fused")
     assert (ids == CLASSES["fused"].id).all()
+    legend = only_rows(data[("/world/legend", True)]["Points2D:class_ids"])
+    assert CLASSES["fused"].id in legend and CLASSES["fused_box"].id not in legend
     pose = est.pose[1, ::ESTIMATE_STRIDE]
     cov = est.pose_cov[1, ::ESTIMATE_STRIDE, :2, :2]
     d = strips - pose[:, None, :2]
