@@ -469,9 +469,10 @@ def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str |
     """The y-up transform and the annotation context on ``world``, the legend under the map
     ``bounds (2, 2)`` (:data:`LEGEND_COLUMNS` columns of labelled points) and the notes that
     explain it, static."""
-    rec.log(WORLD, rr.Transform3D(mat3x3=Y_UP), static=True)
+    # one row (one call): the batcher may split or merge separate calls by wall-clock timing
     rec.log(
         WORLD,
+        rr.Transform3D(mat3x3=Y_UP),
         rr.AnnotationContext(
             [rr.AnnotationInfo(id=c.id, label=c.label, color=c.color) for c in CLASSES.values()]
         ),
