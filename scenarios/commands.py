@@ -1,8 +1,10 @@
 """The ``run`` and ``scenarios`` sub-commands of ``robotsim`` (``scenarios.cli`` wires them).
 
-``robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]`` runs one
-scenario headless and writes its rerun recording and its JSON summary, both atomically: a
-user error or a crash leaves neither file behind (nor a half of one). Both destinations are
+``robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
+[--spawn | --connect [ADDR]]`` runs one scenario headless and writes its rerun recording and
+its JSON summary, both atomically: a user error or a crash leaves neither file behind (nor a
+half of one); ``--spawn`` or ``--connect`` also streams the recording, with the same
+blueprint, to a viewer it starts or to a running one. Both destinations are
 checked before anything runs. The run checks its own guarantee: exit status 1 when the
 truth left an interval set although the sonar has no faults configured.
 """
@@ -55,6 +57,20 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration", type=float, metavar="S", help="override the scenario's duration, seconds"
     )
+    live = parser.add_mutually_exclusive_group()
+    live.add_argument(
+        "--spawn",
+        action="store_true",
+        help="also start rerun's viewer and stream the recording to it (same blueprint)",
+    )
+    live.add_argument(
+        "--connect",
+        nargs="?",
+        const="",
+        metavar="ADDR",
+        help="also stream the recording to a running viewer at ADDR (host:port or a "
+        "rerun+http:// URL; default 127.0.0.1:9876)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -88,6 +104,16 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if bar:
             bar.close()
+    if args.spawn or args.connect is not None:
+        from scenarios.recording import stream_recording, viewer_url
+
+        stream_recording(
+            spec,
+            result.log,
+            result.estimation,
+            spawn=args.spawn,
+            connect_url=viewer_url(args.connect),
+        )
     timing = summary["timing"]
     rmse = summary["rmse_position_m"]
     print(

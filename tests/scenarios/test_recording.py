@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
+import pytest
 
 from scenarios.recording import CONE_ARC_POINTS, cone_outlines, echo_points
 
@@ -129,3 +131,472 @@ def test_same_scenario_and_seed_log_the_same_data(tmp_path):
                 (rows, c["time"]) for rows, c in second[key]
             ]
     assert first != other_seed  # the comparison sees a change of the sensor noise
+
+
+# --- The recording read back: the frame, the classes, the styles and the blueprint ---------
+
+RUN_S = 4.0
+
+
+def recorded(tmp_path_factory, rule: str):
+    """A short hall run with the fusion ``rule``, its result and its recording's path."""
+    import dataclasses
+
+    from scenarios.recording import write_recording
+    from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
+
+    spec = load_scenario("hall").with_run(duration_s=RUN_S)
+    spec = dataclasses.replace(spec, estimation=dataclasses.replace(spec.estimation, fusion=rule))
+    result = run_scenario(spec)
+    path = tmp_path_factory.mktemp(rule) / "hall.rrd"
+    write_recording(path, spec, result.log, result.estimation)
+    return spec, result, path
+
+
+@pytest.fixture(scope="module")
+def clamp_run(tmp_path_factory):
+    return recorded(tmp_path_factory, "clamp")
+
+
+@pytest.fixture(scope="module")
+def truncated_run(tmp_path_factory):
+    return recorded(tmp_path_factory, "truncated")
+
+
+def entity_columns(path, store: str = "recording") -> dict:
+    """Per entity path: its columns (without row ids) merged over its chunks, static rows
+    under ``(path, True)``, the others under ``(path, False)``; a column is the list of its
+    rows, times in nanoseconds. ``store``: the ``"recording"`` or the ``"blueprint"``."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    entry = (reader.recordings() if store == "recording" else reader.blueprints())[0]
+    data: dict = {}
+    for chunk in reader.stream(store=entry):
+        batch = chunk.to_record_batch()
+        merged = data.setdefault((chunk.entity_path, chunk.is_static), {})
+        for name in batch.schema.names:
+            if name == "rerun.controls.RowId":
+                continue
+            column = batch.column(name)
+            if pa.types.is_duration(column.type) or pa.types.is_timestamp(column.type):
+                column = column.cast(pa.int64())  # nanoseconds
+            merged.setdefault(name, []).extend(column.to_pylist())
+    return data
+
+
+def rgba(packed: int) -> tuple[int, int, int, int]:
+    """A colour read back (``0xRRGGBBAA``) as ``(r, g, b, a)``."""
+    return tuple(int(packed) >> shift & 0xFF for shift in (24, 16, 8, 0))  # type: ignore[return-value]
+
+
+def only(rows: list):
+    """The one value of a static component logged as one row of one instance."""
+    assert len(rows) == 1 and len(rows[0]) == 1, rows
+    return rows[0][0]
+
+
+def annotation_classes(data: dict) -> dict[int, tuple[str, tuple]]:
+    """The annotation context on ``/world`` read back: class id -> (label, rgba)."""
+    context = data[("/world", True)]["AnnotationContext:context"]
+    assert len(context) == 1
+    return {
+        entry["class_id"]: (
+            entry["class_description"]["info"]["label"],
+            rgba(entry["class_description"]["info"]["color"]),
+        )
+        for entry in only(context)
+    }
+
+
+def test_the_world_is_drawn_y_up(clamp_run):
+    """The y-down 2-D view looks at ``/`` and ``/world`` carries ``y -> -y``: the map's top
+    wall (largest y) is drawn at the top of the screen (smallest view y)."""
+    spec, _, path = clamp_run
+    data = entity_columns(path)
+    matrix = np.array(only(data[("/world", True)]["Transform3D:mat3x3"])).reshape(3, 3)
+    np.testing.assert_array_equal(matrix, np.diag([1.0, -1.0, 1.0]))  # symmetric: order moot
+    walls = np.array(only_rows(data[("/world/map/walls", True)]["LineStrips2D:strips"]))
+    np.testing.assert_allclose(walls, spec.map.segments)
+    view_y = (walls.reshape(-1, 2) @ matrix[:2, :2].T)[:, 1]
+    top = np.argmax(walls.reshape(-1, 2)[:, 1])
+    assert view_y[top] == view_y.min()
+
+    views = blueprint_views(path)
+    (map_view,) = [v for v in views.values() if v["class"] == "2D"]
+    # the transform applies: the view's origin is an ancestor of /world, its contents world
+    assert map_view["origin"] == "/" and map_view["contents"] == ["/world/**"]
+    x_range, y_range = map_view["bounds"]
+    (x0, x1), (y0, y1) = spec.map.bounds
+    assert x_range[0] < x0 and x1 < x_range[1]
+    assert y_range[0] < -y1 and -y0 < y_range[1]  # the map, reflected, inside the bounds
+    legend = np.array(only_rows(data[("/world/legend", True)]["Points2D:positions"]))
+    assert (y_range[0] < -legend[:, 1]).all() and (-legend[:, 1] < y_range[1]).all()
+
+
+def only_rows(rows: list) -> list:
+    """The instances of a static component logged as one row."""
+    assert len(rows) == 1, rows
+    return rows[0]
+
+
+#: Entities of the map and the component that holds what they draw.
+DRAWN = {
+    "LineStrips2D": "strips",
+    "Points2D": "positions",
+    "Boxes2D": "half_sizes",
+    "Ellipses2D": "half_sizes",
+    "Arrows2D": "vectors",
+}
+
+
+def test_every_thing_drawn_has_a_named_coloured_class(clamp_run):
+    from scenarios.recording import CLASSES
+
+    _, _, path = clamp_run
+    data = entity_columns(path)
+    classes = annotation_classes(data)
+    assert classes == {c.id: (c.label, c.color) for c in CLASSES.values()}
+    assert len({label for label, _ in classes.values()}) == len(classes)  # told apart by name
+    names = {"truth", "ukf_only", "fused", "fused_box", "mcl", "outer_box", "hull", "echo"}
+    assert names <= set(CLASSES) and {"cone_echo", "cone_no_echo", "inner_box"} <= set(CLASSES)
+    world = {entity for entity, _ in data if entity.startswith("/world/")}
+    used: set[int] = set()
+    for entity in world:
+        columns = {**data.get((entity, True), {}), **data.get((entity, False), {})}
+        archetypes = {name.split(":")[0] for name in columns if ":" in name}
+        drawn = [a for a in archetypes if f"{a}:{DRAWN.get(a)}" in columns]
+        assert len(drawn) == 1, (entity, archetypes)
+        ids = columns.get(f"{drawn[0]}:class_ids")
+        assert ids, f"{entity} draws without a class"
+        used |= {i for row in ids for i in (row or [])}
+    assert used <= set(classes)
+    expected = {CLASSES[n].id for n in names - {"mcl"}} | {CLASSES["wall"].id}
+    assert expected <= used  # the run draws truth, both estimates, the clamp box, sets, echoes
+    legend = data[("/world/legend", True)]
+    assert set(only_rows(legend["Points2D:class_ids"])) == used  # the legend lists what is drawn
+    assert only_rows(legend["Points2D:show_labels"]) == [True]
+
+
+def test_series_are_styled_in_the_colours_of_the_map(clamp_run):
+    from scenarios.recording import EPOCH_SERIES
+    from scenarios.runner import BRANCHES
+
+    _, _, path = clamp_run
+    data = entity_columns(path)
+    classes = annotation_classes(data)
+    label_colour = dict(classes.values())
+    for quantity in ("position_m", "heading_rad"):
+        names = []
+        for branch in BRANCHES:
+            columns = data[(f"/errors/{quantity}/{branch}", False)]
+            colours = {rgba(c) for row in columns["SeriesLines:colors"] for c in row}
+            (name,) = {n for row in columns["SeriesLines:names"] for n in row}
+            names.append(name)
+            # the branch's colour in the map: the class whose label starts the series name
+            (label,) = [label for label in label_colour if name.split(" (")[0] == label]
+            assert colours == {label_colour[label]}, (quantity, branch)
+        assert len(set(names)) == len(names)
+    colours = set()
+    for entity in EPOCH_SERIES:
+        columns = data[(f"/{entity}", False)]
+        rows = len(columns["Scalars:scalars"])
+        assert len(columns["SeriesLines:names"]) == rows and all(columns["SeriesLines:names"])
+        colours.add(columns["SeriesLines:colors"][0][0])
+    steps = data[("/intervals/status", False)]["SeriesLines:interpolation_mode"]
+    assert {value for row in steps for value in row} == {2}  # StepAfter: named steps
+    assert "0 global" in data[("/intervals/status", False)]["SeriesLines:names"][0][0]
+
+
+def blueprint_views(path) -> dict[str, dict]:
+    """The views of the recording's blueprint read back, by display name: class, origin,
+    contents, visual bounds, time ranges and per-entity overrides."""
+    data: dict = {}
+    for (entity, _), columns in entity_columns(path, "blueprint").items():
+        data.setdefault(entity, {}).update(columns)
+    views = {}
+    for entity, columns in data.items():
+        if "ViewBlueprint:class_identifier" not in columns:
+            continue
+
+        def value(sub: str, name: str, view: str = entity):
+            rows = data.get(f"{view}/{sub}", {}).get(name)
+            return rows[-1][0] if rows and rows[-1] else None
+
+        overrides = {
+            key[len(f"{entity}/ViewContents/overrides") : -len("/visualizers")]: columns_
+            for key, columns_ in data.items()
+            if key.startswith(f"{entity}/ViewContents/overrides/")
+        }
+        bounds = value("VisualBounds2D", "VisualBounds2D:range")
+        views[columns["ViewBlueprint:display_name"][-1][0]] = {
+            "class": columns["ViewBlueprint:class_identifier"][-1][0],
+            "origin": columns["ViewBlueprint:space_origin"][-1][0],
+            "contents": data[f"{entity}/ViewContents"]["ViewContents:query"][-1],
+            "bounds": (bounds["x_range"], bounds["y_range"]) if bounds else None,
+            "time_ranges": value("VisibleTimeRanges", "VisibleTimeRanges:ranges"),
+            "time_axis": value("TimeAxis", "TimeAxis:view_range"),
+            "overrides": overrides,
+        }
+    return views
+
+
+def time_panel(path) -> dict:
+    """The time panel's settings in the recording's blueprint."""
+    data: dict = {}
+    for (entity, _), columns in entity_columns(path, "blueprint").items():
+        if entity == "/time_panel":
+            data.update(columns)
+    return data
+
+
+def test_the_blueprint_has_the_map_the_plots_by_unit_and_the_raw_sensors(clamp_run):
+    from scenarios.recording import RAW_WINDOW_S, TRAIL_WINDOW_S
+
+    _, _, path = clamp_run
+    views = blueprint_views(path)
+    panel = time_panel(path)
+    assert panel["TimePanelBlueprint:timeline"] == [["time"]]
+    assert panel["TimePanelBlueprint:play_state"] != [[2]]  # not playing at 1x
+    plots = {name: v for name, v in views.items() if v["class"] == "TimeSeries"}
+    # one unit per plot, named in its title
+    unit = {tuple(v["contents"]): name.rsplit("(", 1)[-1].rstrip(")") for name, v in plots.items()}
+    assert unit[("/errors/position_m/**",)] == "m" and unit[("/intervals/box_width_m",)] == "m"
+    assert unit[("/errors/heading_rad/**",)] == "rad"
+    assert unit[("/intervals/area_m2",)] == "m²" and unit[("/intervals/epoch_ms",)] == "ms"
+    (status,) = [v for v in plots.values() if "/intervals/status" in v["contents"]]
+    assert status["contents"] == ["/intervals/status", "/intervals/q_used"]
+    # raw sensors in their own views, a window before the cursor; the others the whole run
+    raw = [v for v in plots.values() if v["contents"][0].startswith(("/sensors", "/truth"))]
+    assert {v["contents"][0].split("/")[1] for v in raw} == {"sensors", "truth"} and len(raw) == 5
+    for view in plots.values():
+        if view in raw:
+            window = {"start": -round(RAW_WINDOW_S * 1e9), "end": 0}
+            assert view["time_ranges"] == {"timeline": "time", "range": window}
+            assert view["time_axis"] == window  # the axis follows the window
+        else:
+            assert view["time_ranges"] is None
+            assert view["time_axis"] == {"start": None, "end": None}  # the whole run
+    (notes,) = [v for v in views.values() if v["class"] == "TextDocument"]
+    assert notes["origin"] == "notes/legend"
+    (map_view,) = [v for v in views.values() if v["class"] == "2D"]
+    overrides = map_view["overrides"]
+    trails = {
+        "/world/robot/trail",
+        "/world/estimates/ukf_only/trail",
+        "/world/estimates/fused/trail",
+    }
+    paths = {t.replace("trail", "path") for t in trails}
+    assert set(overrides) == trails | paths
+    for trail in trails:  # a window up to the cursor
+        assert overrides[trail]["VisibleTimeRanges:ranges"] == [
+            [{"timeline": "time", "range": {"start": -round(TRAIL_WINDOW_S * 1e9), "end": 0}}]
+        ]
+    for whole in paths:  # the optional faint layer, off by default
+        assert overrides[whole]["EntityBehavior:visible"] == [[False]]
+
+
+def test_the_epoch_time_axis_clips_only_the_slow_epochs():
+    from types import SimpleNamespace
+
+    from scenarios.recording import EPOCH_AXIS_FACTOR, epoch_axis
+
+    def estimation(epoch_ms):
+        epochs = SimpleNamespace(elapsed_s=np.asarray(epoch_ms, dtype=float) * 1e-3)
+        return SimpleNamespace(epochs=epochs)
+
+    typical = np.r_[np.full(99, 4.0), 5.0]
+    assert epoch_axis(estimation(typical)) is None  # nothing off the scale
+    axis = epoch_axis(estimation(np.r_[9000.0, typical]))  # a slow global epoch
+    assert axis is not None
+    bottom, top = axis
+    assert bottom == 0.0 and top == pytest.approx(
+        EPOCH_AXIS_FACTOR * np.percentile(np.r_[9000.0, typical], 95)
+    )
+    assert 5.0 < top < 9000.0
+    assert epoch_axis(None) is None and epoch_axis(estimation([])) is None
+
+
+def outline_rows(data: dict, branch: str):
+    """The ``branch``'s outline strips ``(S, P, 2)``, class ids ``(S,)`` and times ``(S,)`` s."""
+    columns = data[(f"/world/estimates/{branch}/ellipse", False)]
+    strips = np.array([row[0] for row in columns["LineStrips2D:strips"]])
+    ids = np.array([row[0] for row in columns["LineStrips2D:class_ids"]])
+    return strips, ids, np.array(columns["time"]) * 1e-9
+
+
+def test_the_fused_outline_under_the_clamp_is_the_box_it_was_clamped_to(clamp_run):
+    """The clamp leaves the covariance: after the first clamp the fused branch shows the
+    box of its last clamp, not the (UKF-only) covariance; the UKF-only branch its own
+    2-sigma ellipse."""
+    from scenarios.recording import CLASSES, ELLIPSE_SIGMA, ESTIMATE_STRIDE
+
+    _, result, path = clamp_run
+    est = result.estimation
+    data = entity_columns(path)
+    strips, ids, t_s = outline_rows(data, "fused")
+    np.testing.assert_allclose(t_s, result.log.t_s[::ESTIMATE_STRIDE], atol=1e-9)
+    clamp_t = result.log.t_s[est.epoch_index][est.component >= 0]
+    boxes = est.fused_box[est.component >= 0]
+    assert len(clamp_t) >= 2
+    for strip, class_id, t in zip(strips, ids, t_s, strict=True):
+        earlier = np.flatnonzero(clamp_t <= t + 1e-12)
+        if len(earlier) == 0:
+            assert class_id == CLASSES["fused"].id
+            continue
+        box = boxes[earlier[-1], :2]
+        assert class_id == CLASSES["fused_box"].id
+        np.testing.assert_allclose(strip.min(axis=0), box[:, 0])
+        np.testing.assert_allclose(strip.max(axis=0), box[:, 1])
+        on_side = np.isclose(strip[:, None, :], box[None, :, :].transpose(0, 2, 1)).any(axis=(1, 2))
+        assert on_side.all()  # every point on the box's boundary
+    assert (ids == CLASSES["fused_box"].id).sum() > len(ids) // 2
+
+    strips, ids, _ = outline_rows(data, "ukf_only")
+    assert (ids == CLASSES["ukf_only"].id).all()
+    pose = est.pose[0, ::ESTIMATE_STRIDE]
+    cov = est.pose_cov[0, ::ESTIMATE_STRIDE, :2, :2]
+    d = strips - pose[:, None, :2]
+    mahalanobis = np.einsum("spi,sij,spj->sp", d, np.linalg.inv(cov), d)
+    np.testing.assert_allclose(mahalanobis, ELLIPSE_SIGMA**2, rtol=1e-5)
+
+
+def test_the_fused_ellipse_under_truncation_is_the_covariance_it_leaves(truncated_run):
+    """The truncated rule updates the covariance: the fused ellipse is that covariance's, and
+    it is smaller than the UKF-only one once the boxes have been used."""
+    from scenarios.recording import CLASSES, ELLIPSE_SIGMA, ESTIMATE_STRIDE
+
+    _, result, path = truncated_run
+    est = result.estimation
+    data = entity_columns(path)
+    strips, ids, _ = outline_rows(data, "fused")
+    assert (ids == CLASSES["fused"].id).all()
+    legend = only_rows(data[("/world/legend", True)]["Points2D:class_ids"])
+    assert CLASSES["fused"].id in legend and CLASSES["fused_box"].id not in legend
+    pose = est.pose[1, ::ESTIMATE_STRIDE]
+    cov = est.pose_cov[1, ::ESTIMATE_STRIDE, :2, :2]
+    d = strips - pose[:, None, :2]
+    mahalanobis = np.einsum("spi,sij,spj->sp", d, np.linalg.inv(cov), d)
+    np.testing.assert_allclose(mahalanobis, ELLIPSE_SIGMA**2, rtol=1e-5)
+    ukf_area = np.sqrt(np.linalg.det(est.pose_cov[0, -1, :2, :2]))
+    fused_area = np.sqrt(np.linalg.det(est.pose_cov[1, -1, :2, :2]))
+    assert fused_area < ukf_area
+
+
+def test_one_hull_per_connected_component(clamp_run):
+    _, result, path = clamp_run
+    epochs = result.estimation.epochs
+    columns = entity_columns(path)[("/world/intervals/hull", False)]
+    ends = np.cumsum(epochs.box_counts)
+    assert len(columns["Boxes2D:centers"]) == len(epochs.t_s)
+    for e, (centres, half) in enumerate(
+        zip(columns["Boxes2D:centers"], columns["Boxes2D:half_sizes"], strict=True)
+    ):
+        boxes = epochs.boxes[ends[e] - epochs.box_counts[e] : ends[e], :2]
+        labels = epochs.labels[ends[e] - epochs.box_counts[e] : ends[e]]
+        expected = sorted(
+            (
+                tuple(boxes[labels == label, :, 0].min(axis=0)),
+                tuple(boxes[labels == label, :, 1].max(axis=0)),
+            )
+            for label in np.unique(labels)
+        )
+        got = sorted(
+            (tuple(np.subtract(c, h)), tuple(np.add(c, h)))
+            for c, h in zip(centres or [], half or [], strict=True)
+        )
+        assert len(got) == epochs.components[e] == len(expected), e
+        np.testing.assert_allclose(np.array(got), np.array(expected), atol=1e-5)
+
+
+def test_the_trails_follow_the_paths_segment_by_segment(clamp_run):
+    from scenarios.recording import TRAIL_STRIDE
+
+    _, result, path = clamp_run
+    data = entity_columns(path)
+    for entity, xy in (
+        ("/world/robot", result.log.pose[:, :2]),
+        ("/world/estimates/ukf_only", result.estimation.pose[0, :, :2]),
+        ("/world/estimates/fused", result.estimation.pose[1, :, :2]),
+    ):
+        columns = data[(f"{entity}/trail", False)]
+        segments = np.array([row[0] for row in columns["LineStrips2D:strips"]])  # (S, 2, 2)
+        shown = xy[::TRAIL_STRIDE]
+        np.testing.assert_allclose(segments[:, 1], shown, atol=1e-5)
+        np.testing.assert_allclose(segments[1:, 0], shown[:-1], atol=1e-5)
+        np.testing.assert_allclose(np.array(columns["time"]) * 1e-9, result.log.t_s[::TRAIL_STRIDE])
+        whole = only_rows(data[(f"{entity}/path", True)]["LineStrips2D:strips"])
+        np.testing.assert_allclose(np.array(whole[0]), xy, atol=1e-5)
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # a stream saved as it came
+def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
+    """``robotsim run --connect HOST:PORT`` streams to a running rerun server (here one that
+    saves what it receives): the same entities and rows as the file, and the blueprint."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from rerun.chunk import RrdReader
+
+    port = free_port()
+    received = tmp_path / "received.rrd"
+    rerun_cli = str(Path(sys.executable).with_name("rerun"))
+    server = subprocess.Popen(
+        [rerun_cli, "--port", str(port), "--save", str(received)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        import socket
+
+        deadline = time.monotonic() + 30
+        while True:  # wait for the server to listen
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the rerun server did not start"
+                time.sleep(0.2)
+        robotsim = str(Path(sys.executable).with_name("robotsim"))
+        rrd = tmp_path / "hall.rrd"
+        done = subprocess.run(
+            [
+                *(robotsim, "run", "hall", "--duration", "2", "--rrd", str(rrd)),
+                *("--summary", str(tmp_path / "hall.json"), "--connect", f"127.0.0.1:{port}"),
+            ],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert done.returncode == 0, done.stderr
+        deadline = time.monotonic() + 30
+        while not (received.exists() and received.stat().st_size > 0):
+            assert time.monotonic() < deadline, "nothing received"
+            time.sleep(0.2)
+        time.sleep(1.0)
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+
+    def rows(path) -> dict:
+        counts: dict = {}
+        for (entity, static), columns in entity_columns(path).items():
+            first: list = next(iter(columns.values()), [])
+            counts[(entity, static)] = len(first)
+        return counts
+
+    assert rows(received) == rows(rrd)
+    assert len(RrdReader(received).blueprints()) == 1
+    assert blueprint_views(received).keys() == blueprint_views(rrd).keys()
