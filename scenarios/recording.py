@@ -39,6 +39,7 @@ the time series.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -47,6 +48,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from robotsim.robot import wrap_angle
+from scenarios.errors import InternalError
+from scenarios.outputs import write_bytes
 from scenarios.runner import BRANCHES
 
 if TYPE_CHECKING:
@@ -83,14 +86,46 @@ def write_recording(
     path: str | Path, spec: ScenarioSpec, log: SimulationLog, estimation: Estimation | None = None
 ) -> None:
     """Write the recording of ``log`` (a run of ``spec``) and of its ``estimation`` (if any)
-    to the ``.rrd`` file ``path``."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
-    rec.save(path, default_blueprint=default_blueprint())
+    to the ``.rrd`` file ``path``, then read it back (:func:`verify_recording`).
+
+    rerun encodes into memory (a binary stream) and this function writes the bytes: rerun's
+    own file sink only logs a failed write (a full disk) and then blocks on disconnect, so a
+    truncated file could not be told from a complete one. Here a failed write raises an
+    ``OSError`` naming ``path``.
+    """
+    recording_id = f"{spec.name}-seed{spec.run.seed}"
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    stream = rr.binary_stream(rec)
+    rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)
     record_run(rec, spec, log)
     if estimation is not None:
         record_estimation(rec, log, estimation)
     rec.flush()
     rec.disconnect()
+    data = stream.read()
+    write_bytes(path, b"" if data is None else data)
+    verify_recording(path, recording_id)
+
+
+def verify_recording(path: str | Path, recording_id: str) -> None:
+    """Read the ``.rrd`` file ``path`` back with rerun's reader: it must end with its footer
+    (the manifest rerun writes last) and hold the recording ``recording_id``.
+
+    Raises:
+        InternalError: the file is truncated, unreadable or holds another recording.
+    """
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():  # a file without footer also warns: the error says it
+            warnings.simplefilter("ignore")
+            reader = RrdReader(path)
+            found = [entry.recording_id for entry in reader.recordings()]
+            reader.store()  # reads the footer's manifest: fails on a truncated file
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise InternalError(f"the recording {path} does not read back: {exc}") from exc
+    if found != [recording_id]:
+        raise InternalError(f"the recording {path} holds {found}, not [{recording_id!r}]")
 
 
 def default_blueprint() -> rrb.Blueprint:

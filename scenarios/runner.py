@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from intervals.errors import IntervalError
+from intervals.errors import IntervalBudgetError
 from intervals.sonar import SonarBelt
 from intervals.tracker import TrackerSettings
 from localization.dead_reckoning import (
@@ -152,10 +152,8 @@ def run_scenario(
     simulate_s = time.perf_counter() - start
     try:
         estimation, times = estimate(spec, log, progress=progress)
-    except (
-        IntervalError
-    ) as exc:  # an impossible [estimation] setting met at run time (a box explosion)
-        raise ScenarioError(spec.source, "estimation", str(exc)) from None
+    except IntervalBudgetError as exc:  # a precision too fine for the map, met at run time
+        raise ScenarioError(spec.source, "estimation.eps_m", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))

@@ -67,6 +67,7 @@ from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from robotsim.world import World
 from scenarios.errors import ScenarioError
+from scenarios.feasibility import check_feasible
 from scenarios.tables import Table
 
 #: The built-in scenarios: one TOML file per built-in map, in ``scenarios/builtin/``.
@@ -235,7 +236,9 @@ def parse_scenario(
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, None, f"not valid TOML: {exc}") from None
-    return _from_dict(data, source=source, base_dir=base_dir or Path.cwd(), name=name)
+    return check_feasible(
+        _from_dict(data, source=source, base_dir=base_dir or Path.cwd(), name=name)
+    )
 
 
 def _load_file(path: Path, *, name: str, source: str) -> ScenarioSpec:
