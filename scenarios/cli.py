@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import platform
 import signal
 import sys
@@ -43,6 +44,9 @@ EXIT_INTERNAL_ERROR = 3
 #: Signals that stop a run as Ctrl-C does (SIGINT raises KeyboardInterrupt by itself):
 #: the temporary files are removed and the exit status is 128 + the signal's number.
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+#: The environment variable of rerun's native logger (set to "off" unless the user set it).
+RERUN_LOG_VARIABLE = "RUST_LOG"
 
 #: The distribution whose version ``robotsim --version`` prints.
 DISTRIBUTION = "robotsim-testbed"
@@ -107,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit status."""
+    # rerun's native logger writes to stderr on its own (a dropped stream on a stop, a
+    # failed write); its failures reach us as exceptions, so keep stderr to our one line.
+    os.environ.setdefault(RERUN_LOG_VARIABLE, "off")
     parser = build_parser()
     args = parser.parse_args(argv)
     with warnings.catch_warnings(record=True) as caught, _stop_signals_raise():
@@ -131,9 +138,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
             return EXIT_USER_ERROR
         except KeyboardInterrupt:
+            _quiet_finalisers()
             _say("robotsim: interrupted")
             return 128 + signal.SIGINT
         except Stopped as stop:
+            _quiet_finalisers()
             _say(f"robotsim: stopped by {stop}")
             return 128 + stop.signum
         except Exception as exc:  # every other failure is ours: say so, keep the traceback
@@ -208,6 +217,13 @@ def _stop_signals_raise() -> Iterator[None]:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+def _quiet_finalisers() -> None:
+    """After a stop, let objects whose construction the signal cut short (a rerun stream
+    without its native half) fail to finalise silently: the process is exiting, and their
+    "Exception ignored in __del__" would break the one line on stderr."""
+    sys.unraisablehook = lambda unraisable: None
 
 
 def _say(text: str) -> None:
