@@ -276,7 +276,11 @@ def named_outputs(argv: list[str]) -> set[str]:
 
 
 def check_outcome(
-    status: int, err: str, folder: Path, before: dict[str, bytes], outputs: set[str] = frozenset()
+    status: int,
+    err: str,
+    folder: Path,
+    before: dict[str, bytes],
+    outputs: frozenset[str] | set[str] = frozenset(),
 ) -> None:
     """The promise, for one case run in ``folder`` whose files were ``before``; a file named
     as an output (and not an input of the run, which the CLI refuses) may change on exit 0."""

@@ -128,7 +128,7 @@ def test_check_folder_destination_refuses_the_current_folder_and_its_ancestors(
     (inner / outputs.MARKER).write_text("")  # even a marked folder: the user works in it
     monkeypatch.chdir(inner)
     for path in (".", inner, tmp_path / "a", "..", inner / ".."):
-        assert "current folder" in outputs.check_folder_destination(path), path
+        assert "current folder" in str(outputs.check_folder_destination(path)), path
     assert outputs.check_folder_destination("new") is None
 
 
@@ -143,12 +143,12 @@ def test_no_output_may_be_an_input(tmp_path):
         tmp_path / "link.toml",
         tmp_path / "." / "s.toml",
     ):
-        assert "is an input" in outputs.check_destination(path, [scenario]), path
+        assert "is an input" in str(outputs.check_destination(path, [scenario])), path
     (tmp_path / "maps").mkdir()
     (tmp_path / "maps" / outputs.MARKER).write_text("")
     (tmp_path / "maps" / "room.wkt").write_text("")
     reason = outputs.check_folder_destination(tmp_path / "maps", [tmp_path / "maps" / "room.wkt"])
-    assert "holds an input" in reason
+    assert "holds an input" in str(reason)
     assert outputs.check_destination(tmp_path / "other.json", [scenario]) is None
 
 
