@@ -162,16 +162,24 @@ def _temporary_file(path: Path) -> Path:
 
 
 def _naming(exc: OSError, temporaries: list[Path], destinations: list[Path]) -> OSError:
-    """``exc`` with the user's path in place of a temporary name (or of no name at all)."""
-    for tmp, path in zip(temporaries, destinations, strict=True):
-        if exc.filename is None and len(destinations) == 1:
-            break
-        if exc.filename is not None and Path(exc.filename).name.startswith(
-            (tmp.name, _temporary_prefix(path))
-        ):
-            break
+    """``exc`` with the user's path in place of a temporary name (or of no name at all).
+
+    ``temporaries`` may be fewer than ``destinations`` (a failure while creating them)."""
+    if exc.filename is None:
+        if len(destinations) != 1:
+            return exc
+        path = destinations[0]
     else:
-        return exc
+        name = Path(exc.filename).name
+        owners = [
+            path
+            for i, path in enumerate(destinations)
+            if name.startswith(_temporary_prefix(path))
+            or (i < len(temporaries) and name.startswith(f".{temporaries[i].name}."))
+        ]
+        if not owners:
+            return exc
+        path = owners[0]
     renamed = OSError(exc.errno, exc.strerror or str(exc), str(path))
     renamed.__cause__ = exc
     return renamed
