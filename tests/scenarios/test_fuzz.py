@@ -370,7 +370,21 @@ OPTION_VALUES = st.one_of(
     st.text(max_size=6),
 )
 OUTPUT_PATHS = st.sampled_from(
-    ["out/x.rrd", "out/x.json", "s.toml", "map.wkt", ".", "out", "/", "out/é☃.rrd", "a\nb.json"]
+    [
+        "out/x.rrd",
+        "out/x.json",
+        "s.toml",
+        "map.wkt",
+        ".",
+        "out",
+        "/",
+        "out/é☃.rrd",
+        "a\nb.json",
+        "/proc/x.json",
+        "/dev/full",
+        "s.toml/x.rrd",
+        "x" * 300,
+    ]
 )
 
 
