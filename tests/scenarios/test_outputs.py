@@ -238,8 +238,10 @@ def test_a_truncated_recording_does_not_verify(tmp_path):
 def test_a_temporary_that_cannot_be_created_is_reported_under_the_users_path(tmp_path):
     """``/proc`` takes no new file: the error names the destination, not ``.x.<pid>-....part``,
     and the first destination's temporary is gone too."""
-    with pytest.raises(OSError) as failure:
-        with outputs.atomic_paths(tmp_path / "a.rrd", "/proc/x.json"):
-            pass
+    with (
+        pytest.raises(OSError) as failure,
+        outputs.atomic_paths(tmp_path / "a.rrd", "/proc/x.json"),
+    ):
+        pass
     assert failure.value.filename == "/proc/x.json"
     assert not any(tmp_path.iterdir())
