@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 from scipy.linalg import lapack
 
-from localization.errors import EstimationError
+from localization.errors import EstimationError, NumericalError
 
 TWO_PI = 2.0 * math.pi
 INV_TWO_PI = 1.0 / TWO_PI
@@ -172,11 +172,18 @@ def solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
     One system goes to LAPACK's ``gesv`` directly (1.5 us against 6 us for the wrapper of
     ``np.linalg.solve`` on 3x3); a batch to ``np.linalg.solve``, which runs the same ``gesv``
-    on each system, so the two agree to the last bit. A singular system raises
-    ``np.linalg.LinAlgError`` as ``np.linalg.solve`` does.
+    on each system, so the two agree to the last bit.
+
+    Raises:
+        NumericalError: a system is singular (to working precision).
     """
     if matrix.ndim == 2 and rhs.ndim == 2:
         _, _, solution, info = lapack.dgesv(matrix, rhs)
         if info == 0:  # C order, as from np.linalg.solve: later products then round alike
             return np.ascontiguousarray(solution)
-    return np.linalg.solve(matrix, rhs)
+    try:
+        return np.linalg.solve(matrix, rhs)
+    except np.linalg.LinAlgError as exc:
+        raise NumericalError(
+            f"solve: the {matrix.shape[-1]}x{matrix.shape[-1]} system is singular ({exc})"
+        ) from None

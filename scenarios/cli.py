@@ -1,30 +1,81 @@
 """The ``robotsim`` command: run scenarios headless, list them, reproduce the papers.
 
+    robotsim [--debug] [--version] COMMAND ...
     robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
     robotsim scenarios
     robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
     robotsim report RESULTS [--out DIR]
     robotsim reproduce NAME [options]
 
-A user's mistake (bad scenario file, impossible setting, NaN reading) prints one line
-``robotsim: error: <file>: <key>: <reason>`` on stderr and exits with status 2; no
-traceback and no half-written output.
+Exit statuses and what stderr holds (always at most one line, without ``--debug``):
+
+- 0: done; 1: the run broke its own guarantee (the line says how);
+- 2: a user's mistake (a bad scenario file, option or output path, a full disk):
+  ``robotsim: error: <file>: <key>: <reason>``; nothing written;
+- 3: a defect of robotsim (a numerical or internal failure on input that passed
+  validation): one line saying so, the traceback in a crash file whose path the line gives
+  (``--debug`` prints the traceback instead);
+- 128 + n: stopped by signal n (SIGINT, SIGTERM, SIGHUP); temporary files removed.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import platform
+import signal
 import sys
-from collections.abc import Sequence
+import tempfile
+import threading
+import traceback
+import warnings
+from collections.abc import Iterator, Sequence
+from importlib import metadata
+from typing import NoReturn
 
-from intervals.errors import IntervalError
-from localization.errors import EstimationError
 from robotsim.errors import RobotsimError
 from scenarios.errors import ScenarioError
 
 #: The errors that are a user's to fix: printed on one line, exit status 2.
-USER_ERRORS = (ScenarioError, RobotsimError, EstimationError, IntervalError)
+USER_ERRORS = (ScenarioError, RobotsimError)
 EXIT_USER_ERROR = 2
+#: A defect of the tool (anything else that escapes a command).
+EXIT_INTERNAL_ERROR = 3
+
+#: Signals that stop a run as Ctrl-C does (SIGINT raises KeyboardInterrupt by itself):
+#: the temporary files are removed and the exit status is 128 + the signal's number.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+#: The environment variable of rerun's native logger (set to "off" unless the user set it).
+RERUN_LOG_VARIABLE = "RUST_LOG"
+
+#: The distribution whose version ``robotsim --version`` prints.
+DISTRIBUTION = "robotsim-testbed"
+
+
+class Stopped(BaseException):
+    """A stop signal arrived; unwinds like KeyboardInterrupt (cleanup runs, nothing moves)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (exit status 2), as every error."""
+
+    def error(self, message: str) -> NoReturn:
+        _say(f"{self.prog}: error: {message} (see {self.prog} --help)")
+        raise SystemExit(EXIT_USER_ERROR)
+
+
+def version() -> str:
+    """The installed version of the testbed (``unknown`` when run from a bare source tree)."""
+    try:
+        return metadata.version(DISTRIBUTION)
+    except metadata.PackageNotFoundError:
+        return "unknown"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,9 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
     from scenarios import report as report_command
     from scenarios.reproduce import experiments
 
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="robotsim",
         description="Mobile-robot simulation and guaranteed-localisation testbed.",
+    )
+    parser.add_argument("--version", action="version", version=f"robotsim {version()}")
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="on an internal failure print the full traceback (and any warnings) to stderr",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -64,28 +121,134 @@ def build_parser() -> argparse.ArgumentParser:
     for name, module in experiments().items():
         p = rsub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
-        p.set_defaults(handler=module.main)
+        p.set_defaults(handler=module.main, check=commands.check_reproduce)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit status."""
+    # rerun's native logger writes to stderr on its own (a dropped stream on a stop, a
+    # failed write); its failures reach us as exceptions, so keep stderr to our one line.
+    os.environ.setdefault(RERUN_LOG_VARIABLE, "off")
     parser = build_parser()
     args = parser.parse_args(argv)
+    with warnings.catch_warnings(record=True) as caught, _stop_signals_raise():
+        warnings.simplefilter("default")
+        try:
+            if getattr(args, "check", None):
+                args.check(args)
+            status = int(args.handler(args) or 0)
+        except USER_ERRORS as exc:
+            _say(f"robotsim: error: {exc}")
+            return EXIT_USER_ERROR
+        except OSError as exc:
+            # A file system failure (unwritable folder, full disk) while reading or writing:
+            # the atomic writers have removed their temporaries and name the user's path.
+            target = f"{exc.filename}: " if exc.filename else ""
+            _say(f"robotsim: error: {target}{exc.strerror or exc}")
+            return EXIT_USER_ERROR
+        except MemoryError:
+            _say(
+                "robotsim: error: out of memory: the run needs more memory than this machine "
+                "has (ask for fewer runs, steps or seconds)"
+            )
+            return EXIT_USER_ERROR
+        except KeyboardInterrupt:
+            _quiet_finalisers()
+            _say("robotsim: interrupted")
+            return 128 + signal.SIGINT
+        except Stopped as stop:
+            _quiet_finalisers()
+            _say(f"robotsim: stopped by {stop}")
+            return 128 + stop.signum
+        except Exception as exc:  # every other failure is ours: say so, keep the traceback
+            return _internal_failure(exc, argv, caught, debug=args.debug)
+    if args.debug:
+        for warning in caught:
+            _say(f"robotsim: warning: {warning.category.__name__}: {warning.message}")
+    return status
+
+
+def _internal_failure(
+    exc: BaseException,
+    argv: Sequence[str] | None,
+    caught: list[warnings.WarningMessage],
+    *,
+    debug: bool,
+) -> int:
+    """Report a failure of the tool: one line; the traceback to stderr or a crash file."""
+    report = _crash_report(exc, argv, caught)
+    summary = f"{type(exc).__name__}: {exc}"
+    if debug:
+        sys.stderr.write(report)
+        _say(f"robotsim: internal error (a defect of robotsim, not of your input): {summary}")
+        return EXIT_INTERNAL_ERROR
     try:
-        return int(args.handler(args) or 0)
-    except USER_ERRORS as exc:
-        print(f"robotsim: error: {exc}", file=sys.stderr)
-        return EXIT_USER_ERROR
-    except OSError as exc:
-        # A file system failure (unwritable folder, disk full) while reading or writing
-        # outputs: one line, and the atomic writers have already removed their partial files.
-        target = f" {exc.filename}" if exc.filename else ""
-        print(f"robotsim: error:{target}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print("robotsim: interrupted", file=sys.stderr)
-        return 130
+        with tempfile.NamedTemporaryFile(
+            "w", prefix="robotsim-crash-", suffix=".txt", delete=False, encoding="utf-8"
+        ) as crash:
+            crash.write(report)
+        where = f"traceback in {crash.name}"
+    except OSError as write_error:
+        where = f"no crash file ({write_error.strerror or write_error}); rerun with --debug"
+    _say(
+        f"robotsim: internal error (a defect of robotsim, not of your input; please report it): "
+        f"{summary}; {where}"
+    )
+    return EXIT_INTERNAL_ERROR
+
+
+def _crash_report(
+    exc: BaseException, argv: Sequence[str] | None, caught: list[warnings.WarningMessage]
+) -> str:
+    """What a defect report needs: versions, the command line, the traceback, the warnings."""
+    lines = [
+        f"robotsim {version()} on Python {platform.python_version()} ({platform.platform()})",
+        f"arguments: {list(sys.argv[1:] if argv is None else argv)!r}",
+        "",
+        *traceback.format_exception(exc),
+    ]
+    lines += [
+        f"warning: {w.category.__name__}: {w.message} ({w.filename}:{w.lineno})" for w in caught
+    ]
+    return "\n".join(line.rstrip("\n") for line in lines) + "\n"
+
+
+@contextlib.contextmanager
+def _stop_signals_raise() -> Iterator[None]:
+    """While the block runs, SIGTERM and SIGHUP raise :class:`Stopped` (once; a repeat
+    during the cleanup is ignored). Only the main thread may set handlers: elsewhere a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: object) -> None:
+        for other in STOP_SIGNALS:
+            signal.signal(other, signal.SIG_IGN)
+        raise Stopped(signum)
+
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _quiet_finalisers() -> None:
+    """After a stop, let objects whose construction the signal cut short (a rerun stream
+    without its native half) fail to finalise silently: the process is exiting, and their
+    "Exception ignored in __del__" would break the one line on stderr."""
+    sys.unraisablehook = lambda unraisable: None
+
+
+def _say(text: str) -> None:
+    """Print ``text`` on stderr as exactly one line, whatever it holds (line breaks in a
+    file name or a message become spaces; characters the stream cannot encode are escaped)."""
+    line = " ".join(text.splitlines())
+    encoding = getattr(sys.stderr, "encoding", None) or "utf-8"
+    sys.stderr.write(line.encode(encoding, "backslashreplace").decode(encoding) + "\n")
+    sys.stderr.flush()
 
 
 if __name__ == "__main__":

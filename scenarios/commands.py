@@ -4,9 +4,14 @@
 [--spawn | --connect [ADDR]]`` runs one scenario headless and writes its rerun recording and
 its JSON summary, both atomically: a user error or a crash leaves neither file behind (nor a
 half of one); ``--spawn`` or ``--connect`` also streams the recording, with the same
-blueprint, to a viewer it starts or to a running one. Both destinations are
-checked before anything runs. The run checks its own guarantee: exit status 1 when the
-truth left an interval set although the sonar has no faults configured.
+blueprint, to a viewer it starts or to a running one. Both destinations are checked before
+anything runs, and neither may be an input of the run (the scenario file, the map file it
+names). The recording is read back before it is moved into place. The run checks its own
+guarantee: exit status 1 when, although the sonar has no faults configured, the truth left an
+interval set or an epoch found no set at all.
+
+``robotsim reproduce NAME``'s options are checked here too (:func:`check_reproduce`) before
+the experiment runs: ``--out`` replaces only a folder an earlier reproduction wrote.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import tomllib
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -26,6 +32,11 @@ DEFAULT_RUNS_DIR = Path("runs")
 
 #: The options of ``robotsim run`` that override a key of the scenario's ``[run]``.
 RUN_OPTIONS = {"run.seed": "--seed", "run.duration_s": "--duration"}
+
+#: Limits of the reproductions' Monte Carlo options: beyond them the arrays of estimates do
+#: not fit in memory (``--runs`` times ``--steps`` states per filter).
+MAX_RUNS = 100_000
+MAX_RUN_STEPS = 20_000_000
 
 #: The part of the progress bar the run (simulation and estimation) fills; the recording
 #: fills the rest.
@@ -78,12 +89,14 @@ def run(args: argparse.Namespace) -> int:
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
 
+    if Path(args.scenario).is_dir():
+        raise ScenarioError(args.scenario, None, "is a folder, not a scenario file")
     spec = with_run_options(load_scenario(args.scenario), args.seed, args.duration)
     stem = f"{spec.name}-seed{spec.run.seed}"
     rrd_path = args.rrd or DEFAULT_RUNS_DIR / f"{stem}.rrd"
     summary_path = args.summary or DEFAULT_RUNS_DIR / f"{stem}.json"
 
-    _check_destinations(rrd_path, summary_path)
+    _check_destinations(rrd_path, summary_path, scenario_inputs(args.scenario))
 
     bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
     start = time.perf_counter()
@@ -147,28 +160,68 @@ def guarantee_failure(spec: ScenarioSpec, summary: dict[str, Any]) -> str | None
     configured, more than ``q_max`` outliers in a scan may legitimately lose the truth.
     """
     sonar = spec.sensors.sonar
-    containment = summary["containment"]
-    if (
-        sonar.outlier_prob > 0.0
-        or sonar.lost_echo_prob > 0.0
-        or containment is None
-        or containment >= 1.0
-    ):
+    if sonar.outlier_prob > 0.0 or sonar.lost_echo_prob > 0.0:
+        return None
+    containment, empty = summary["containment"], summary["empty_epochs"]
+    broken = []
+    if containment is not None and containment < 1.0:
+        broken.append(f"the truth left the interval set (containment {containment:.4g})")
+    if empty:
+        status = summary["epoch_status"]
+        broken.append(
+            f"{empty} epoch(s) found no set ({status['inconsistent']} inconsistent, "
+            f"{status['lost']} lost) although the truth fits every scan"
+        )
+    if not broken:
         return None
     return (
-        f"the guarantee failed: the truth left the interval set (containment {containment:.4g}) "
+        f"the guarantee failed: {'; '.join(broken)}, "
         f"although {spec.source}'s sonar has no faults configured"
     )
 
 
-def _check_destinations(rrd_path: Path, summary_path: Path) -> None:
-    """Refuse, before any simulation, outputs that could not both be written."""
+def scenario_inputs(name_or_path: str | Path) -> list[Path]:
+    """The files a scenario reads: the scenario file and the map file it names (none for
+    a built-in). Read only to protect them from being written over."""
+    if str(name_or_path) in builtin_names():
+        return []
+    path = Path(name_or_path)
+    inputs = [path]
+    try:
+        map_file = tomllib.loads(path.read_text(encoding="utf-8")).get("map", {}).get("file")
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, AttributeError):
+        return inputs  # the loader has reported (or will report) what is wrong
+    if isinstance(map_file, str):
+        inputs.append(path.parent / map_file)
+    return inputs
+
+
+def _check_destinations(rrd_path: Path, summary_path: Path, inputs: list[Path]) -> None:
+    """Refuse, before any simulation, outputs that could not both be written or that would
+    write over an input of the run."""
     for option, path in (("--rrd", rrd_path), ("--summary", summary_path)):
-        reason = outputs.check_destination(path)
+        reason = outputs.check_destination(path, inputs)
         if reason is not None:
             raise ScenarioError(None, option, reason)
     if rrd_path.resolve() == summary_path.resolve():
         raise ScenarioError(None, "--summary", "same file as --rrd")
+
+
+def check_reproduce(args: argparse.Namespace) -> None:
+    """Refuse, before a reproduction runs, an ``--out`` it may not replace and Monte Carlo
+    sizes whose arrays could not fit in memory."""
+    runs, steps = getattr(args, "runs", None), getattr(args, "steps", None)
+    if runs is not None and runs > MAX_RUNS:
+        raise ScenarioError(None, "--runs", f"must be at most {MAX_RUNS}, got {runs}")
+    if runs is not None and steps is not None and runs * steps > MAX_RUN_STEPS:
+        raise ScenarioError(
+            None,
+            "--steps",
+            f"--runs x --steps must be at most {MAX_RUN_STEPS:.0e}, got {runs} x {steps}",
+        )
+    reason = outputs.check_folder_destination(args.out)
+    if reason is not None:
+        raise ScenarioError(None, "--out", reason)
 
 
 def list_scenarios(args: argparse.Namespace) -> int:

@@ -90,7 +90,10 @@ class EpochLog:
         components = [r.components() for r in results]
         outer = [r.outer for r in results]
         contains = np.array(
-            [bool(len(b)) and bool(contains_points(b, p[None]).any()) for b, p in zip(outer, truth)]
+            [
+                bool(len(b)) and bool(contains_points(b, p[None]).any())
+                for b, p in zip(outer, truth, strict=True)
+            ]
         )
         return cls(
             t_s=np.asarray(t_s, dtype=np.float64),

@@ -67,6 +67,7 @@ The localisation pipeline (when the run has an estimation):
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -76,6 +77,8 @@ import rerun.blueprint as rrb
 
 from robotsim.robot import wrap_angle
 from scenarios.epochs import STATUS
+from scenarios.errors import InternalError
+from scenarios.outputs import write_bytes
 from scenarios.runner import BRANCHES
 
 if TYPE_CHECKING:
@@ -282,12 +285,48 @@ def write_recording(
     path: str | Path, spec: ScenarioSpec, log: SimulationLog, estimation: Estimation | None = None
 ) -> None:
     """Write the recording of ``log`` (a run of ``spec``) and of its ``estimation`` (if any)
-    to the ``.rrd`` file ``path``."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
-    rec.save(path, default_blueprint=default_blueprint(spec.map.bounds, epoch_axis(estimation)))
+    to the ``.rrd`` file ``path``, then read it back (:func:`verify_recording`).
+
+    rerun encodes into memory (a binary stream) and this function writes the bytes: rerun's
+    own file sink only logs a failed write (a full disk) and then blocks on disconnect, so a
+    truncated file could not be told from a complete one. Here a failed write raises an
+    ``OSError`` naming ``path``.
+    """
+    recording_id = f"{spec.name}-seed{spec.run.seed}"
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    stream = rr.binary_stream(rec)
+    rec.send_blueprint(
+        default_blueprint(spec.map.bounds, epoch_axis(estimation)),
+        make_active=False,
+        make_default=True,
+    )
     record_all(rec, spec, log, estimation)
     rec.flush()
     rec.disconnect()
+    data = stream.read()
+    write_bytes(path, b"" if data is None else data)
+    verify_recording(path, recording_id)
+
+
+def verify_recording(path: str | Path, recording_id: str) -> None:
+    """Read the ``.rrd`` file ``path`` back with rerun's reader: it must end with its footer
+    (the manifest rerun writes last) and hold the recording ``recording_id``.
+
+    Raises:
+        InternalError: the file is truncated, unreadable or holds another recording.
+    """
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():  # a file without footer also warns: the error says it
+            warnings.simplefilter("ignore")
+            reader = RrdReader(path)
+            found = [entry.recording_id for entry in reader.recordings()]
+            reader.store()  # reads the footer's manifest: fails on a truncated file
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise InternalError(f"the recording {path} does not read back: {exc}") from exc
+    if found != [recording_id]:
+        raise InternalError(f"the recording {path} holds {found}, not [{recording_id!r}]")
 
 
 def stream_recording(

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from intervals.errors import IntervalError
+from intervals.errors import IntervalBudgetError
 from intervals.sonar import SonarBelt
 from localization.dead_reckoning import (
     DeadReckoning,
@@ -156,10 +156,8 @@ def run_scenario(
     simulate_s = time.perf_counter() - start
     try:
         estimation, times = estimate(spec, log, progress=progress)
-    except (
-        IntervalError
-    ) as exc:  # an impossible [estimation] setting met at run time (a box explosion)
-        raise ScenarioError(spec.source, "estimation", str(exc)) from None
+    except IntervalBudgetError as exc:  # a precision too fine for the map, met at run time
+        raise ScenarioError(spec.source, "estimation.eps_m", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
@@ -251,7 +249,7 @@ def estimate(
     fuse_s = 0.0
     clock = _DeadReckoningClock(dr)
     last_t = log.sonar_t_s[scans[0]] if len(scans) else 0.0
-    for count, (scan, index) in enumerate(zip(scans, epoch_index)):
+    for count, (scan, index) in enumerate(zip(scans, epoch_index, strict=True)):
         belief = clock.run(int(index))
         found = epochs.step(log.sonar_range_m[scan], float(log.sonar_t_s[scan] - last_t))
         last_t = log.sonar_t_s[scan]

@@ -80,6 +80,7 @@ from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
 from robotsim.world import World
 from scenarios.errors import ScenarioError
+from scenarios.feasibility import check_feasible
 from scenarios.tables import Table
 from validated_records import Bounds, bounded, choices, declared_bounds, validate_fields
 
@@ -323,7 +324,9 @@ def parse_scenario(
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, None, f"not valid TOML: {exc}") from None
-    return _from_dict(data, source=source, base_dir=base_dir or Path.cwd(), name=name)
+    return check_feasible(
+        _from_dict(data, source=source, base_dir=base_dir or Path.cwd(), name=name)
+    )
 
 
 def _load_file(path: Path, *, name: str, source: str) -> ScenarioSpec:

@@ -5,6 +5,9 @@ Fixtures live in ``tests/conftest.py``.
 
 from __future__ import annotations
 
+import resource
+import signal
+
 import numpy as np
 
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
@@ -58,3 +61,14 @@ def boxes_around(truth: np.ndarray, rng: np.random.Generator, count: int) -> np.
     frac[: count // 5] = rng.choice([0.0, 1.0], size=(count // 5, 3))  # truth on a face
     lo = truth - frac * w
     return np.stack([lo, np.maximum(lo + w, truth)], axis=-1)
+
+
+def small_file_limit(max_bytes: int):
+    """A ``preexec_fn``: files may not grow beyond ``max_bytes`` (``ulimit -f``); the signal
+    such a write raises is ignored, so the write fails with ``EFBIG`` as on a full disk."""
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (max_bytes, max_bytes))
+
+    return limit

@@ -246,10 +246,15 @@ def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
 
     spec = load_scenario("hall")
     assert spec.sensors.sonar.outlier_prob == 0.0 and spec.sensors.sonar.lost_echo_prob == 0.0
-    failure = guarantee_failure(spec, {"containment": 0.96})
+
+    def summary(containment):  # the figures guarantee_failure reads, no empty epoch
+        status = {"inconsistent": 0, "lost": 0}
+        return {"containment": containment, "empty_epochs": 0, "epoch_status": status}
+
+    failure = guarantee_failure(spec, summary(0.96))
     assert "containment 0.96" in failure and spec.source in failure
-    assert guarantee_failure(spec, {"containment": 1.0}) is None
-    assert guarantee_failure(spec, {"containment": None}) is None  # no set at all: nothing to judge
+    assert guarantee_failure(spec, summary(1.0)) is None
+    assert guarantee_failure(spec, summary(None)) is None  # no epoch at all: nothing to judge
     without_free_space = spec.with_estimation(free_space=False)  # unsound with lost echoes
     for fault in ("outlier_prob", "lost_echo_prob"):
         faulty = dataclasses.replace(
@@ -258,7 +263,7 @@ def test_a_broken_guarantee_is_named_only_when_the_sonar_has_no_faults():
                 spec.sensors, sonar=dataclasses.replace(spec.sensors.sonar, **{fault: 0.1})
             ),
         )
-        assert guarantee_failure(faulty, {"containment": 0.96}) is None, fault
+        assert guarantee_failure(faulty, summary(0.96)) is None, fault
     rows = {"sivia": {"containment": 1.0}, "imagesp": {"containment": 0.5}}
     assert missed_guarantee(rows) == "imagesp containment 0.5"
     assert missed_guarantee({"sivia": {"containment": 1.0}}) == ""
