@@ -94,6 +94,7 @@ heading offsets are wrapped as in the generic filter when the points are wide
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from enum import StrEnum
@@ -585,6 +586,7 @@ class DeadReckoning:
         self._mean = np.array(initial.mean)
         self._cov = np.array(initial.cov)
         self._record(0)
+        self._buffers: tuple[np.ndarray, np.ndarray] | None = None  # (accel, z) grown by extend
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
         if settings.engine == StepEngine.COMPILED:
             self._compiled = _CompiledStep(data, settings)
@@ -625,6 +627,42 @@ class DeadReckoning:
         self._mean = np.array(belief.mean)
         self._cov = np.array(belief.cov)
         self._record(self.index)
+
+    def extend(self, more: OdometryData) -> None:
+        """Append the samples of ``more`` after the data's last (the online localiser's data
+        arrive stretch by stretch). The arrays grow by doubling, so appending ``N`` samples in
+        any number of stretches costs ``O(N)``; the filter and the history are unchanged.
+
+        Raises:
+            EstimationError: data with another period, wheel base, noise or batch layout.
+        """
+        data = self.data
+        if (
+            more.dt_s != data.dt_s
+            or more.wheel_base_m != data.wheel_base_m
+            or more.z.shape[1:] != data.z.shape[1:]
+            or not (np.array_equal(more.R, data.R) and np.array_equal(more.Q, data.Q))
+        ):
+            raise EstimationError(
+                "DeadReckoning.extend: the samples must have the period, wheel base, noise and "
+                "batch layout of the data"
+            )
+        old, new = data.count, data.count + more.count
+        if self._buffers is None or new > self._buffers[0].shape[0]:
+            capacity = max(new, 2 * old)
+            accel, z = (
+                np.empty((capacity,) + data.accel_input_m_s2.shape[1:]),
+                np.empty((capacity,) + data.z.shape[1:]),
+            )
+            accel[:old], z[:old] = data.accel_input_m_s2, data.z
+            self._buffers = (accel, z)
+            self._mean_hist = _grown(self._mean_hist, capacity)
+            self._cov_hist = _grown(self._cov_hist, capacity)
+        accel, z = self._buffers
+        accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
+        self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
+        if self.settings.engine == StepEngine.COMPILED:  # views of the buffers, not copies
+            self._compiled = _CompiledStep(self.data, self.settings)
 
     def run(self, until_index: int) -> Gaussian:
         """Advance to sample ``until_index`` (inclusive) and return the belief there.
@@ -679,6 +717,13 @@ class DeadReckoning:
         self._mean_hist[k, :, THETA] = wrap_angle(self._mean[:, THETA])
         recorded = self._cov_hist.shape[-1]
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
+
+
+def _grown(values: np.ndarray, capacity: int) -> np.ndarray:
+    """``values`` copied into the first rows of an array of ``capacity`` rows."""
+    out = np.empty((capacity,) + values.shape[1:], dtype=values.dtype)
+    out[: values.shape[0]] = values
+    return out
 
 
 class _CompiledStep:
