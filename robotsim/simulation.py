@@ -323,11 +323,12 @@ def _run_physics(
                 stream.emit(k - 1, states, observer)
             if k == count - 1:
                 stream.emit(k, states, observer)
+                break
             x, y, theta = observer.pose()
+        elif k == count - 1:
+            break
         else:
             x, y, theta, _, _ = now
-        if k == count - 1:
-            break
         wanted = command(k * dt_s, x, y, theta)
         commands.append(wanted)
         wanted_v, wanted_omega = wanted

@@ -55,11 +55,14 @@ __all__ = [
     "UKF_ONLY",
     "Estimation",
     "StageTimes",
+    "Steering",
     "dead_reckoning_noise",
     "estimate",
     "estimate_offline",
     "estimation_summary",
+    "gathered",
     "localizer_for",
+    "scan_samples",
 ]
 
 
@@ -157,6 +160,25 @@ def localizer_for(spec: ScenarioSpec) -> OnlineLocalizer:
         settings,
         spec.start_pose,
     )
+
+
+class Steering:
+    """The localiser as the simulator's observer in a closed loop (``robotsim.simulation``):
+    fed every sample as it comes, it gives the controller the estimate of row ``branch``
+    (:data:`FUSED` or :data:`UKF_ONLY`)."""
+
+    def __init__(self, localizer: OnlineLocalizer, branch: int) -> None:
+        self.localizer, self.branch = localizer, branch
+
+    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
+        self.localizer.push_odometry(t_s, ticks, gyro_rad_s, accel_m_s2)
+
+    def scan(self, t_s: float, readings_m) -> None:
+        self.localizer.push_scan(t_s, readings_m)
+
+    def pose(self) -> tuple[float, float, float]:
+        x, y, theta = self.localizer.estimate().pose[self.branch].tolist()
+        return x, y, theta
 
 
 def scan_samples(log: SimulationLog) -> np.ndarray:

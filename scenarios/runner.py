@@ -21,12 +21,23 @@ from typing import Any
 import numpy as np
 
 from intervals.errors import IntervalError
-from robotsim.simulation import KidnapEvent, SensorSuite, SimulationLog, simulate
+from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLog, simulate
 from robotsim.world import WorldParams
 from scenarios.errors import ScenarioError
-from scenarios.metrics import summarize
-from scenarios.pipeline import BRANCHES, Estimation, StageTimes, estimate, estimation_summary
-from scenarios.spec import ScenarioSpec
+from scenarios.metrics import route_stats, summarize
+from scenarios.pipeline import (
+    BRANCHES,
+    FUSED,
+    UKF_ONLY,
+    Estimation,
+    StageTimes,
+    Steering,
+    estimate,
+    estimation_summary,
+    gathered,
+    localizer_for,
+)
+from scenarios.spec import Follow, ScenarioSpec
 
 #: What other modules take from here: the run, and the pipeline's records of it.
 __all__ = ["BRANCHES", "Estimation", "RunResult", "StageTimes", "run_scenario", "simulate_spec"]
@@ -85,29 +96,38 @@ def run_scenario(
     ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``).
     """
     start = time.perf_counter()
-    log = simulate_spec(
-        spec,
-        kidnaps=kidnaps,
-        progress=(lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None,
-    )
-    simulate_s = time.perf_counter() - start
+    simulation_progress = (lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None
     try:
-        estimation, times = estimate(
-            spec,
-            log,
-            progress=(
-                (lambda f: progress(SIMULATION_PROGRESS + (1.0 - SIMULATION_PROGRESS) * f))
-                if progress
-                else None
-            ),
-        )
-    except (
-        IntervalError
-    ) as exc:  # an impossible [estimation] setting met at run time (a box explosion)
+        if spec.follow == Follow.TRUTH:
+            log = simulate_spec(spec, kidnaps=kidnaps, progress=simulation_progress)
+            simulate_s = time.perf_counter() - start
+            estimation, times = estimate(
+                spec,
+                log,
+                progress=(
+                    (lambda f: progress(SIMULATION_PROGRESS + (1.0 - SIMULATION_PROGRESS) * f))
+                    if progress
+                    else None
+                ),
+            )
+        else:  # closed loop: the simulator and the localiser stepped together
+            localizer = localizer_for(spec)
+            branch = UKF_ONLY if spec.follow == Follow.UKF_ONLY else FUSED
+            log = simulate_spec(
+                spec,
+                kidnaps=kidnaps,
+                progress=progress,
+                observer=Steering(localizer, branch),
+            )
+            estimation, times = gathered(localizer, log)
+            estimation_s = times.dead_reckoning_s + times.intervals_s + times.fusion_s
+            simulate_s = time.perf_counter() - start - estimation_s
+    except IntervalError as exc:  # an impossible [estimation] setting met at run time
         raise ScenarioError(spec.source, "estimation", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
+    summary["route"] = route_stats(spec, log)
     return RunResult(
         log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s
     )
@@ -117,8 +137,10 @@ def simulate_spec(
     spec: ScenarioSpec,
     kidnaps: tuple[KidnapEvent, ...] = (),
     progress: Callable[[float], None] | None = None,
+    observer: Observer | None = None,
 ) -> SimulationLog:
-    """The simulator run ``spec`` describes, its randomness seeded by the spec's seed."""
+    """The simulator run ``spec`` describes, its randomness seeded by the spec's seed
+    (``observer``: the estimator the controller steers on, None for the true pose)."""
     sensors = spec.sensors
     return simulate(
         spec.map,
@@ -136,4 +158,5 @@ def simulate_spec(
         world=WorldParams(step_hz=spec.run.rate_hz),
         kidnaps=kidnaps,
         progress=progress,
+        observer=observer,
     )

@@ -23,7 +23,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     Either ``waypoints_m`` (an array of ``[x, y]``, followed by pure pursuit; the other keys
     are the fields of ``robotsim.control.Route``) or ``[[route.profile]]`` steps
     ``{duration_s, v_m_s, omega_rad_s | omega_deg_s}`` played in order, then a stop. Without
-    a route the robot stands still.
+    a route the robot stands still. ``follow`` (:class:`Follow`, ``"truth"``): the pose the
+    pure pursuit steers on, the true one or, closed loop, the estimate of a localisation
+    branch (waypoints only: a profile ignores the pose).
 ``[sensors.encoders]``, ``[sensors.gyro]``, ``[sensors.accelerometer]``, ``[sensors.sonar]``
     The fields of the simulator's sensor parameter classes; for the sonar also ``count``
     (an even belt on the robot's rim, the default) in place of ``mount_xy`` and
@@ -60,7 +62,7 @@ import tomllib
 import types
 import typing
 from collections.abc import Callable
-from enum import Enum
+from enum import Enum, StrEnum
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -121,6 +123,18 @@ TRACKER_KEYS = (
     "imagesp_pitch_m",
     "ray_test",
 )
+
+
+class Follow(StrEnum):
+    """The pose the route's controller steers on (``[route] follow``)."""
+
+    TRUTH = "truth"
+    """The true pose: the estimator runs beside the motion without steering it (studying
+    the estimator alone)."""
+    ESTIMATE = "estimate"
+    """Closed loop on the fused branch (dead reckoning fused with the interval sets)."""
+    UKF_ONLY = "ukf_only"
+    """Closed loop on the UKF-only branch (dead reckoning alone: it drifts)."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -255,8 +269,14 @@ class ScenarioSpec:
     """What the robot is told to do: a ``Route`` (pure pursuit) or a ``ScriptedProfile``."""
     sensors: SensorsSpec
     estimation: EstimationSpec
+    follow: Follow = Follow.TRUTH
+    """The pose the route's controller steers on (:class:`Follow`)."""
 
     def __post_init__(self) -> None:
+        if self.follow != Follow.TRUTH and not isinstance(self.plan, Route):
+            raise ScenarioError(
+                self.source, "route.follow", "a closed loop needs waypoints_m (a route)"
+            )
         problem = estimation_problem(self.estimation, self.robot, self.sensors.sonar)
         if problem is not None:
             key, reason = problem
@@ -349,7 +369,9 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         float(wrap_angle(math.radians(heading_deg))),
     )
     _check_start(robot_table, segment_map, start_pose, robot)
-    plan = _read_route(top.take_table("route"), segment_map, robot)
+    route_table = top.take_table("route")
+    follow = Follow(route_table.take_str("follow", str(Follow.TRUTH), choices=choices(Follow)))
+    plan = _read_route(route_table, segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar)
     top.finish()
@@ -364,6 +386,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         plan=plan,
         sensors=sensors,
         estimation=estimation,
+        follow=follow,
     )
 
 
