@@ -357,8 +357,33 @@ def estimation_summary(log: SimulationLog, estimation: Estimation) -> dict[str, 
             "moved_epochs": int(np.count_nonzero(moved & clamped)),
             "fused_in_box": bool(in_box.all()),
         },
+        "kidnaps": [
+            {"t_s": float(t), "recovery_s": recovery_s(log, estimation, float(t))}
+            for t in log.kidnap_t_s
+        ],
     }
     return summary
+
+
+#: Recovered: the fused estimate within this distance of the truth (m) for
+#: :data:`RECOVERY_HOLD_S` seconds (the Fox-Burgard-Thrun protocol).
+RECOVERY_DISTANCE_M = 0.45
+RECOVERY_HOLD_S = 10.0
+
+
+def recovery_s(log: SimulationLog, estimation: Estimation, t_s: float) -> float | None:
+    """Seconds from ``t_s`` (a kidnapping) to the first sample from which the fused
+    position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
+    :data:`RECOVERY_HOLD_S` (None: not within the run)."""
+    start = int(np.searchsorted(log.t_s, t_s - 0.5 / log.rate_hz))
+    hold = round(RECOVERY_HOLD_S * log.rate_hz)
+    error = np.linalg.norm(estimation.pose[FUSED, :, :2] - log.pose[:, :2], axis=1)
+    misses = np.concatenate([[0], np.cumsum(error > RECOVERY_DISTANCE_M)])  # misses before k
+    first = np.arange(start, len(error) - hold + 1)
+    clean = misses[first + hold] == misses[first]  # no miss in [k, k + hold)
+    if not clean.any():
+        return None
+    return float((first[np.argmax(clean)] - start) / log.rate_hz)
 
 
 def _in_box(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:

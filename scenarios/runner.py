@@ -93,8 +93,10 @@ def run_scenario(
     """Simulate ``spec``, run the localisation pipeline on its sensor data, summarise.
 
     ``progress(fraction)`` is told the share of the run done (simulation, then epochs);
-    ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``).
+    ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``),
+    beside the scenario's own ``kidnap`` events.
     """
+    kidnaps = spec.kidnaps + tuple(kidnaps)
     start = time.perf_counter()
     simulation_progress = (lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None
     try:
