@@ -662,7 +662,7 @@ class DeadReckoning:
         accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
         self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
         if self.settings.engine == StepEngine.COMPILED:  # views of the buffers, not copies
-            self._compiled = _CompiledStep(self.data, self.settings)
+            self._compiled.bind(self.data)
 
     def run(self, until_index: int) -> Gaussian:
         """Advance to sample ``until_index`` (inclusive) and return the belief there.
@@ -719,6 +719,12 @@ class DeadReckoning:
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
 
 
+def _compiled_input(values) -> np.ndarray:
+    """``values`` as a writable C-contiguous float64 array (a read-only array would be a
+    second signature to compile); the array itself when it already is one."""
+    return np.require(values, dtype=float, requirements=("C", "W"))
+
+
 def _grown(values: np.ndarray, capacity: int) -> np.ndarray:
     """``values`` copied into the first rows of an array of ``capacity`` rows."""
     out = np.empty((capacity,) + values.shape[1:], dtype=values.dtype)
@@ -737,14 +743,8 @@ class _CompiledStep:
     """
 
     def __init__(self, data: OdometryData, settings: DeadReckoningSettings) -> None:
-        count = data.count
-
-        def compiled_input(values):  # a read-only array would be a second signature to compile
-            return np.require(values, dtype=float, requirements=("C", "W"))
-
-        self.accel = compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
-        self.z = compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
-        self.q_cov, self.r_cov = compiled_input(data.Q), compiled_input(data.R)
+        self.bind(data)
+        self.q_cov, self.r_cov = _compiled_input(data.Q), _compiled_input(data.R)
         self.dt_s = float(data.dt_s)
         self.wheel_base_m = float(data.wheel_base_m)
         self.unscented = settings.unscented
@@ -758,6 +758,12 @@ class _CompiledStep:
         else:
             self.gamma = self.weight = self.c0 = 0.0
         self.wrap_offsets = self.gamma >= _WRAP_GAMMA
+
+    def bind(self, data: OdometryData) -> None:
+        """Take the per-sample inputs of ``data`` (the same model: :meth:`DeadReckoning.extend`)."""
+        count = data.count
+        self.accel = _compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
+        self.z = _compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
 
     def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist):
         """Samples ``start..stop-1`` from the belief ``mean (B, 8)``, ``cov (B, 8, 8)`` at
