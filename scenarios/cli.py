@@ -1,6 +1,8 @@
 """The ``robotsim`` command: run scenarios headless, list them, reproduce the papers.
 
     robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
+                 [--sensor-log PATH]
+    robotsim replay LOG [--estimation FILE] [--summary PATH]
     robotsim scenarios
     robotsim reproduce NAME [options]
 
@@ -27,7 +29,7 @@ EXIT_USER_ERROR = 2
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``robotsim`` with its sub-commands."""
-    from scenarios import commands
+    from scenarios import commands, sensor_log
     from scenarios.reproduce import experiments
 
     parser = argparse.ArgumentParser(
@@ -39,6 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a scenario headless; write its recording and summary")
     commands.add_run_arguments(run)
     run.set_defaults(handler=commands.run)
+
+    replay = sub.add_parser("replay", help="run the localiser on a sensor log (no simulator)")
+    sensor_log.add_replay_arguments(replay)
+    replay.set_defaults(handler=sensor_log.replay_command)
 
     listing = sub.add_parser("scenarios", help="list the built-in scenarios")
     listing.set_defaults(handler=commands.list_scenarios)

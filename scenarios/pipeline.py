@@ -22,7 +22,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -43,7 +43,6 @@ from localization.localizer import (
     LocalizerSettings,
     OnlineLocalizer,
 )
-from robotsim.simulation import SimulationLog
 from scenarios.epochs import EpochLog, EpochRunner
 from scenarios.metrics import interval_stats, rmse_heading_rad, rmse_position_m
 from scenarios.spec import ScenarioSpec
@@ -54,6 +53,7 @@ __all__ = [
     "START_POSE_STD",
     "UKF_ONLY",
     "Estimation",
+    "SensorData",
     "StageTimes",
     "Steering",
     "dead_reckoning_noise",
@@ -64,6 +64,33 @@ __all__ = [
     "localizer_for",
     "scan_samples",
 ]
+
+
+class SensorData(Protocol):
+    """What the pipeline reads of a run (``robotsim.simulation.SimulationLog``, or a sensor
+    log read back by ``scenarios.sensor_log``): the samples at ``rate_hz``, the scans, and
+    the truth for the scores (``pose``, ``sonar_pose``, ``kidnap_t_s``)."""
+
+    @property
+    def t_s(self) -> np.ndarray: ...
+    @property
+    def wheel_ticks(self) -> np.ndarray: ...
+    @property
+    def gyro_rad_s(self) -> np.ndarray: ...
+    @property
+    def accel_m_s2(self) -> np.ndarray: ...
+    @property
+    def sonar_t_s(self) -> np.ndarray: ...
+    @property
+    def sonar_range_m(self) -> np.ndarray: ...
+    @property
+    def pose(self) -> np.ndarray: ...
+    @property
+    def sonar_pose(self) -> np.ndarray: ...
+    @property
+    def kidnap_t_s(self) -> np.ndarray: ...
+    @property
+    def rate_hz(self) -> float: ...
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -181,13 +208,13 @@ class Steering:
         return x, y, theta
 
 
-def scan_samples(log: SimulationLog) -> np.ndarray:
+def scan_samples(log: SensorData) -> np.ndarray:
     """``(M,)`` the sample index of each scan (the sample it was taken at)."""
     return np.searchsorted(log.t_s, log.sonar_t_s - 0.5 / log.rate_hz)
 
 
 def estimate(
-    spec: ScenarioSpec, log: SimulationLog, progress: Callable[[float], None] | None = None
+    spec: ScenarioSpec, log: SensorData, progress: Callable[[float], None] | None = None
 ) -> tuple[Estimation, StageTimes]:
     """The online localiser fed ``log``'s sensor data in the order a robot receives them.
 
@@ -210,7 +237,7 @@ def estimate(
     return gathered(localizer, log)
 
 
-def _push(localizer: OnlineLocalizer, log: SimulationLog, start: int, stop: int) -> None:
+def _push(localizer: OnlineLocalizer, log: SensorData, start: int, stop: int) -> None:
     localizer.push_odometry_block(
         log.t_s[start:stop],
         log.wheel_ticks[start:stop],
@@ -219,7 +246,7 @@ def _push(localizer: OnlineLocalizer, log: SimulationLog, start: int, stop: int)
     )
 
 
-def gathered(localizer: OnlineLocalizer, log: SimulationLog) -> tuple[Estimation, StageTimes]:
+def gathered(localizer: OnlineLocalizer, log: SensorData) -> tuple[Estimation, StageTimes]:
     """What ``localizer`` did over the run of ``log`` (its true poses at the epochs give the
     containment figure), and the stage wall times (without the simulation)."""
     history = localizer.history
@@ -249,7 +276,7 @@ def gathered(localizer: OnlineLocalizer, log: SimulationLog) -> tuple[Estimation
 
 
 def estimate_offline(
-    spec: ScenarioSpec, log: SimulationLog, progress: Callable[[float], None] | None = None
+    spec: ScenarioSpec, log: SensorData, progress: Callable[[float], None] | None = None
 ) -> tuple[Estimation, StageTimes]:
     """The same pipeline on the finished log: the dead reckoning built over the whole arrays
     and advanced from epoch to epoch (the reference of :func:`estimate`)."""
@@ -334,7 +361,7 @@ class _DeadReckoningClock:
         return belief
 
 
-def estimation_summary(log: SimulationLog, estimation: Estimation) -> dict[str, Any]:
+def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any]:
     """The estimation figures of the summary: RMSE of both branches over every sample, the
     interval figures, and how the fusion went (deterministic)."""
     truth = log.pose
@@ -371,7 +398,7 @@ RECOVERY_DISTANCE_M = 0.45
 RECOVERY_HOLD_S = 10.0
 
 
-def recovery_s(log: SimulationLog, estimation: Estimation, t_s: float) -> float | None:
+def recovery_s(log: SensorData, estimation: Estimation, t_s: float) -> float | None:
     """Seconds from ``t_s`` (a kidnapping) to the first sample from which the fused
     position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
     :data:`RECOVERY_HOLD_S` (None: not within the run)."""

@@ -361,6 +361,14 @@ def parse_scenario(
     return _from_dict(data, source=source, base_dir=base_dir or Path.cwd(), name=name)
 
 
+def scenario_from_tables(
+    data: dict[str, Any], *, source: str, base_dir: Path, name: str
+) -> ScenarioSpec:
+    """Validate a scenario already read into tables (``tomllib``'s dict), as
+    :func:`parse_scenario` does its text (a replay swaps the ``[estimation]`` table)."""
+    return _from_dict(data, source=source, base_dir=base_dir, name=name)
+
+
 def _load_file(path: Path, *, name: str, source: str) -> ScenarioSpec:
     try:
         text = path.read_text(encoding="utf-8")
