@@ -66,6 +66,7 @@ def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
     assert not np.array_equal(truth.pose, log.pose)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "seed"), [("hall", 0), ("hall", 1), ("office", 0), ("office", 1)])
 def test_steering_on_the_fused_estimate_keeps_the_guarantee_and_the_route(name, seed):
     on_truth = run_scenario(closed(name, Follow.TRUTH, seed)).summary

@@ -35,6 +35,7 @@ def direct_recovery_s(error_m: np.ndarray, start: int, rate_hz: float) -> float 
     return None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fusion", ["clamp", "clamp_heading"])
 def test_a_kidnapping_is_detected_and_the_recovery_time_reported(fusion):
     spec = parse_scenario(
