@@ -94,6 +94,7 @@ heading offsets are wrapped as in the generic filter when the points are wide
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from enum import StrEnum
@@ -585,6 +586,7 @@ class DeadReckoning:
         self._mean = np.array(initial.mean)
         self._cov = np.array(initial.cov)
         self._record(0)
+        self._buffers: tuple[np.ndarray, np.ndarray] | None = None  # (accel, z) grown by extend
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
         if settings.engine == StepEngine.COMPILED:
             self._compiled = _CompiledStep(data, settings)
@@ -625,6 +627,42 @@ class DeadReckoning:
         self._mean = np.array(belief.mean)
         self._cov = np.array(belief.cov)
         self._record(self.index)
+
+    def extend(self, more: OdometryData) -> None:
+        """Append the samples of ``more`` after the data's last (the online localiser's data
+        arrive stretch by stretch). The arrays grow by doubling, so appending ``N`` samples in
+        any number of stretches costs ``O(N)``; the filter and the history are unchanged.
+
+        Raises:
+            EstimationError: data with another period, wheel base, noise or batch layout.
+        """
+        data = self.data
+        if (
+            more.dt_s != data.dt_s
+            or more.wheel_base_m != data.wheel_base_m
+            or more.z.shape[1:] != data.z.shape[1:]
+            or not (np.array_equal(more.R, data.R) and np.array_equal(more.Q, data.Q))
+        ):
+            raise EstimationError(
+                "DeadReckoning.extend: the samples must have the period, wheel base, noise and "
+                "batch layout of the data"
+            )
+        old, new = data.count, data.count + more.count
+        if self._buffers is None or new > self._buffers[0].shape[0]:
+            capacity = max(new, 2 * old)
+            accel, z = (
+                np.empty((capacity,) + data.accel_input_m_s2.shape[1:]),
+                np.empty((capacity,) + data.z.shape[1:]),
+            )
+            accel[:old], z[:old] = data.accel_input_m_s2, data.z
+            self._buffers = (accel, z)
+            self._mean_hist = _grown(self._mean_hist, capacity)
+            self._cov_hist = _grown(self._cov_hist, capacity)
+        accel, z = self._buffers
+        accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
+        self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
+        if self.settings.engine == StepEngine.COMPILED:  # views of the buffers, not copies
+            self._compiled.bind(self.data)
 
     def run(self, until_index: int) -> Gaussian:
         """Advance to sample ``until_index`` (inclusive) and return the belief there.
@@ -681,6 +719,19 @@ class DeadReckoning:
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
 
 
+def _compiled_input(values) -> np.ndarray:
+    """``values`` as a writable C-contiguous float64 array (a read-only array would be a
+    second signature to compile); the array itself when it already is one."""
+    return np.require(values, dtype=float, requirements=("C", "W"))
+
+
+def _grown(values: np.ndarray, capacity: int) -> np.ndarray:
+    """``values`` copied into the first rows of an array of ``capacity`` rows."""
+    out = np.empty((capacity,) + values.shape[1:], dtype=values.dtype)
+    out[: values.shape[0]] = values
+    return out
+
+
 class _CompiledStep:
     """The arguments of :func:`~localization.dead_reckoning_kernel.run_steps` that stay fixed
     over a run (contiguous float64 arrays, one compiled signature), and the checks around it.
@@ -692,14 +743,8 @@ class _CompiledStep:
     """
 
     def __init__(self, data: OdometryData, settings: DeadReckoningSettings) -> None:
-        count = data.count
-
-        def compiled_input(values):  # a read-only array would be a second signature to compile
-            return np.require(values, dtype=float, requirements=("C", "W"))
-
-        self.accel = compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
-        self.z = compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
-        self.q_cov, self.r_cov = compiled_input(data.Q), compiled_input(data.R)
+        self.bind(data)
+        self.q_cov, self.r_cov = _compiled_input(data.Q), _compiled_input(data.R)
         self.dt_s = float(data.dt_s)
         self.wheel_base_m = float(data.wheel_base_m)
         self.unscented = settings.unscented
@@ -713,6 +758,12 @@ class _CompiledStep:
         else:
             self.gamma = self.weight = self.c0 = 0.0
         self.wrap_offsets = self.gamma >= _WRAP_GAMMA
+
+    def bind(self, data: OdometryData) -> None:
+        """Take the per-sample inputs of ``data`` (the same model: :meth:`DeadReckoning.extend`)."""
+        count = data.count
+        self.accel = _compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
+        self.z = _compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
 
     def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist):
         """Samples ``start..stop-1`` from the belief ``mean (B, 8)``, ``cov (B, 8, 8)`` at

@@ -5,6 +5,13 @@ computed afterwards, vectorised over time, with their noise drawn in bulk from c
 generators of the run's ``Generator`` (one child per sensor, so switching one sensor's
 faults on leaves the other sensors' draws unchanged).
 
+Closed loop (an :class:`Observer`: the robot's estimator): the noise does not depend on the
+motion, so it is drawn before the loop; at each step the loop computes the previous
+sample's readings from it (the same arithmetic as the vectorised pass, which still writes
+the log), hands them to the observer and steers on the pose the observer gives back. The
+controller thus sees the estimate one sample late (the accelerometer's central difference
+at a sample needs the next one), a 10 ms latency at 100 Hz.
+
 Commands: the controller asks for a body velocity; the robot's software turns it into
 wheel rates with the NOMINAL radius, and the wheels move the body with the TRUE radii
 (MODELS.md section 2). The resulting true velocity target is clamped to the robot's
@@ -16,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -23,15 +31,20 @@ from robotsim.control import Plan, limit_command
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap
 from robotsim.robot import RobotParams, body_velocity, wheel_rates, wrap_angle
-from robotsim.sensors.encoders import EncoderParams, simulate_ticks, wheel_rotation_increments
+from robotsim.sensors.encoders import EncoderParams, ticks_from_slip, wheel_rotation_increments
 from robotsim.sensors.imu import (
     AccelerometerParams,
     GyroParams,
-    simulate_accelerometer,
-    simulate_gyro,
+    accelerometer_noise,
+    gyro_noise,
     specific_force,
 )
-from robotsim.sensors.sonar import SonarBeltParams, cone_distances, simulate_readings
+from robotsim.sensors.sonar import (
+    SonarBeltParams,
+    cone_distances,
+    readings_from_draws,
+    sonar_draws,
+)
 from robotsim.world import World, WorldParams
 
 
@@ -52,6 +65,49 @@ class KidnapEvent:
 
     t_s: float
     pose: tuple[float, float, float]
+
+
+class Observer(Protocol):
+    """The robot's estimator in a closed loop: fed every sample as the robot gets it, asked
+    for the pose the controller steers on."""
+
+    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
+        """Sample at ``t_s``: tick increments ``(2,)`` int64, yaw rate, specific force ``(2,)``."""
+
+    def scan(self, t_s: float, readings_m) -> None:
+        """The sonar scan ``(k,)`` taken at ``t_s`` (after that sample's odometry)."""
+
+    def pose(self) -> tuple[float, float, float]:
+        """The estimated ``(x_m, y_m, theta_rad)`` the controller is fed."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class SensorNoise:
+    """Every random draw of a run's sensors (``N`` samples, ``M`` scans, ``k`` sonars), drawn
+    before the motion from one child generator per sensor: encoder slip ``(N, 2)``; gyro bias
+    and white noise ``(N,)``; accelerometer bias and white noise ``(N, 2)``; the sonar draws
+    (:func:`robotsim.sensors.sonar.sonar_draws`, each ``(M, k)``)."""
+
+    slip: np.ndarray
+    gyro_bias: np.ndarray
+    gyro_white: np.ndarray
+    accel_bias: np.ndarray
+    accel_white: np.ndarray
+    sonar: tuple[np.ndarray, ...]
+
+    @classmethod
+    def draw(
+        cls, count: int, scans: int, sensors: SensorSuite, rate_hz: float, rng: np.random.Generator
+    ) -> SensorNoise:
+        encoder_rng, gyro_rng, accel_rng, sonar_rng = rng.spawn(4)
+        slip = encoder_rng.standard_normal((count, 2))
+        gyro_bias, gyro_white = gyro_noise(count, sensors.gyro, rate_hz, gyro_rng)
+        accel_bias, accel_white = accelerometer_noise(
+            count, sensors.accelerometer, rate_hz, accel_rng
+        )
+        sonar = sonar_draws((scans, sensors.sonar.count), sensors.sonar, sonar_rng)
+        return cls(slip, gyro_bias, gyro_white, accel_bias, accel_white, sonar)
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +170,7 @@ def simulate(
     world: WorldParams = WorldParams(),
     kidnaps: tuple[KidnapEvent, ...] = (),
     progress: Callable[[float], None] | None = None,
+    observer: Observer | None = None,
 ) -> SimulationLog:
     """Simulate ``duration_s`` seconds of the robot following ``plan`` in ``segment_map``.
 
@@ -127,6 +184,8 @@ def simulate(
         kidnaps: teleports during the run.
         progress: told the fraction of the physics loop done (0 to 1, in steps of about
             1 %), for a progress bar; the sensors after the loop take a small share.
+        observer: None (the controller steers on the true pose), or the estimator the
+            controller steers on (closed loop, module docstring).
 
     Raises:
         RobotsimError: a bad duration, or a start or kidnap pose that collides with a wall.
@@ -137,29 +196,31 @@ def simulate(
     count = round(duration_s * rate_hz) + 1
     sim_world = World(segment_map, robot, start_pose, world)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
+    belt = sensors.sonar
+    scans = np.unique(np.round(np.arange(0.0, duration_s + 1e-9, 1.0 / belt.rate_hz) * rate_hz))
+    scans = scans[scans < count].astype(np.int64)
+    noise = SensorNoise.draw(count, len(scans), sensors, rate_hz, rng)
+    stream = None
+    if observer is not None:
+        stream = _SensorStream(noise, scans, segment_map, robot, sensors, rate_hz, count, schedule)
 
     states, commands, contact = _run_physics(
-        sim_world, plan.controller(robot), robot, count, schedule, progress
+        sim_world, plan.controller(robot), robot, count, schedule, progress, stream, observer
     )
     t_s = np.arange(count) / rate_hz
     pose = np.column_stack([states[:, :2], wrap_angle(states[:, 2])])
     velocity = states[:, 3:5]
 
-    encoder_rng, gyro_rng, accel_rng, sonar_rng = rng.spawn(4)
     rotation = wheel_rotation_increments(states[:, :3], robot)
     kidnapped = np.array(sorted(schedule), dtype=np.int64)
     if kidnapped.size:  # the jump is not odometry: the wheels turned as the robot drove
         before = velocity[kidnapped - 1]
         rotation[kidnapped] = wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
-    wheel_ticks = simulate_ticks(rotation, robot.ticks_per_rev, sensors.encoders, encoder_rng)
-    gyro, gyro_bias = simulate_gyro(velocity[:, 1], sensors.gyro, rate_hz, gyro_rng)
-    accel, accel_bias = simulate_accelerometer(
-        specific_force(velocity, rate_hz), sensors.accelerometer, rate_hz, accel_rng
-    )
+    wheel_ticks = ticks_from_slip(rotation, robot.ticks_per_rev, sensors.encoders, noise.slip)
+    gyro = velocity[:, 1] + noise.gyro_bias + noise.gyro_white
+    accel = specific_force(velocity, rate_hz) + noise.accel_bias + noise.accel_white
+    gyro_bias, accel_bias = noise.gyro_bias, noise.accel_bias
 
-    belt = sensors.sonar
-    scans = np.unique(np.round(np.arange(0.0, duration_s + 1e-9, 1.0 / belt.rate_hz) * rate_hz))
-    scans = scans[scans < count].astype(np.int64)
     true_range = cone_distances(
         pose[scans],
         segment_map.segments,
@@ -167,7 +228,7 @@ def simulate(
         belt.mount_angle_rad,
         belt.half_aperture_rad,
     )
-    readings, fault = simulate_readings(true_range, belt, sonar_rng)
+    readings, fault = readings_from_draws(true_range, belt, noise.sonar)
 
     return SimulationLog(
         t_s=t_s,
@@ -213,13 +274,22 @@ PROGRESS_REPORTS = 100
 
 
 def _run_physics(
-    sim_world: World, controller, robot: RobotParams, count: int, schedule, progress=None
+    sim_world: World,
+    controller,
+    robot: RobotParams,
+    count: int,
+    schedule,
+    progress=None,
+    stream: _SensorStream | None = None,
+    observer: Observer | None = None,
 ):
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
     the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
 
     Contacts come from :meth:`World.on_wall_contact` (pymunk's solver): its callback sets a
-    flag that the loop reads and clears after each step.
+    flag that the loop reads and clears after each step. With an ``observer``, ``stream``
+    gives it each sample once the next state is known, and the controller steers on the
+    observer's pose.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -248,9 +318,17 @@ def _run_physics(
             sim_world.teleport(schedule[k])
         now = state()
         states.append(now)
-        if k == count - 1:
+        if stream is not None and observer is not None:
+            if k >= 1:
+                stream.emit(k - 1, states, observer)
+            if k == count - 1:
+                stream.emit(k, states, observer)
+                break
+            x, y, theta = observer.pose()
+        elif k == count - 1:
             break
-        x, y, theta, _, _ = now
+        else:
+            x, y, theta, _, _ = now
         wanted = command(k * dt_s, x, y, theta)
         commands.append(wanted)
         wanted_v, wanted_omega = wanted
@@ -269,3 +347,65 @@ def _run_physics(
         progress(1.0)
     commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
     return np.array(states), np.array(commands, dtype=np.float64), contact
+
+
+class _SensorStream:
+    """The readings of one sample from the drawn noise and the states so far: the arithmetic
+    of the vectorised pass of :func:`simulate`, element by element, in sample order."""
+
+    def __init__(
+        self,
+        noise: SensorNoise,
+        scans: np.ndarray,
+        segment_map: SegmentMap,
+        robot: RobotParams,
+        sensors: SensorSuite,
+        rate_hz: float,
+        count: int,
+        schedule: dict[int, np.ndarray],
+    ) -> None:
+        self.noise, self.robot, self.sensors = noise, robot, sensors
+        self.segments = segment_map.segments
+        self.scan_of = {int(sample): m for m, sample in enumerate(scans)}
+        self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
+        self.turned = np.zeros(2)  # cumulative wheel turns with slip, rad
+        self.counted = np.zeros(2)  # ticks counted so far
+
+    def emit(self, j: int, states: list, observer: Observer) -> None:
+        """Hand sample ``j`` (and its scan, if any) to ``observer``; ``states`` holds rows
+        ``0..j+1`` (or ``0..j`` for the last sample)."""
+        robot, noise, rate_hz = self.robot, self.noise, self.rate_hz
+        if j == 0:
+            rotation = np.zeros(2)
+        elif j in self.schedule:
+            rotation = wheel_rates(states[j - 1][3:5], robot.true_radii_m, robot.wheel_base_m)
+            rotation = rotation / rate_hz
+        else:
+            window = np.array([states[j - 1][:3], states[j][:3]])
+            rotation = wheel_rotation_increments(window, robot)[1]
+        self.turned = self.turned + rotation * (
+            1.0 + self.sensors.encoders.slip_std * noise.slip[j]
+        )
+        counted = np.floor(self.turned * (robot.ticks_per_rev / (2.0 * np.pi)))
+        ticks = (counted - self.counted).astype(np.int64)
+        self.counted = counted
+        v, omega = states[j][3], states[j][4]
+        gyro = omega + noise.gyro_bias[j] + noise.gyro_white[j]
+        low, high = max(j - 1, 0), min(j + 1, self.count - 1)
+        window_v = np.array([states[i][3] for i in range(low, high + 1)])
+        force = specific_force(np.column_stack([window_v, np.zeros_like(window_v)]), rate_hz)
+        accel = (
+            np.array([force[j - low, 0], v * omega]) + noise.accel_bias[j] + noise.accel_white[j]
+        )
+        t_s = j / rate_hz
+        observer.odometry(t_s, ticks, gyro, accel)
+        scan = self.scan_of.get(j)
+        if scan is not None:
+            x, y, theta = states[j][:3]
+            pose = np.array([[x, y, wrap_angle(theta)]])
+            belt = self.sensors.sonar
+            true_range = cone_distances(
+                pose, self.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+            )
+            draws = tuple(draw[scan : scan + 1] for draw in noise.sonar)
+            observer.scan(t_s, readings_from_draws(true_range, belt, draws)[0][0])

@@ -2,6 +2,8 @@
 
     robotsim [--debug] [--version] COMMAND ...
     robotsim run [SCENARIO] [--rrd PATH] [--summary PATH] [--seed N] [--duration S]
+                 [--sensor-log PATH]
+    robotsim replay LOG [--estimation FILE] [--summary PATH]
     robotsim scenarios
     robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
     robotsim report RESULTS [--out DIR]
@@ -81,7 +83,7 @@ def version() -> str:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``robotsim`` with its sub-commands."""
     from scenarios import campaign as campaign_command
-    from scenarios import commands
+    from scenarios import commands, sensor_log
     from scenarios import report as report_command
     from scenarios.reproduce import experiments
 
@@ -100,6 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a scenario headless; write its recording and summary")
     commands.add_run_arguments(run)
     run.set_defaults(handler=commands.run)
+
+    replay = sub.add_parser("replay", help="run the localiser on a sensor log (no simulator)")
+    sensor_log.add_replay_arguments(replay)
+    replay.set_defaults(handler=sensor_log.replay_command)
 
     listing = sub.add_parser("scenarios", help="list the built-in scenarios")
     listing.set_defaults(handler=commands.list_scenarios)

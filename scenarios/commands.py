@@ -64,6 +64,12 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PATH",
         help="summary JSON to write (default: runs/<scenario>-seed<N>.json)",
     )
+    parser.add_argument(
+        "--sensor-log",
+        type=Path,
+        metavar="PATH",
+        help="also write the run's sensor log (Parquet, scenarios.sensor_log; for robotsim replay)",
+    )
     parser.add_argument("--seed", type=int, metavar="N", help="override the scenario's seed")
     parser.add_argument(
         "--duration", type=float, metavar="S", help="override the scenario's duration, seconds"
@@ -97,6 +103,11 @@ def run(args: argparse.Namespace) -> int:
     summary_path = args.summary or DEFAULT_RUNS_DIR / f"{stem}.json"
 
     _check_destinations(rrd_path, summary_path, scenario_inputs(args.scenario))
+    extra = [args.sensor_log] if args.sensor_log else []
+    for path in extra:
+        reason = outputs.check_destination(path)
+        if reason is not None or path.resolve() in (rrd_path.resolve(), summary_path.resolve()):
+            raise ScenarioError(None, "--sensor-log", reason or "same file as another output")
 
     bar = ProgressBar(sys.stderr, label=stem) if sys.stderr.isatty() else None
     start = time.perf_counter()
@@ -104,7 +115,15 @@ def run(args: argparse.Namespace) -> int:
         result = run_scenario(
             spec, progress=(lambda done: bar.update(RUN_SHARE * done)) if bar else None
         )
-        with outputs.atomic_paths(rrd_path, summary_path) as (rrd_tmp, summary_tmp):
+        with outputs.atomic_paths(rrd_path, summary_path, *extra) as (
+            rrd_tmp,
+            summary_tmp,
+            *log_tmp,
+        ):
+            if log_tmp:
+                from scenarios.sensor_log import write_sensor_log
+
+                write_sensor_log(log_tmp[0], spec, result.log)
             recording_start = time.perf_counter()
             write_recording(rrd_tmp, spec, result.log, result.estimation)
             recording_s = time.perf_counter() - recording_start

@@ -7,11 +7,13 @@ everything else exactly.
 
 from __future__ import annotations
 
+import itertools
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
 
+from robotsim.control import Route
 from robotsim.maps import point_segment_distance
 from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
@@ -244,3 +246,51 @@ def consistency_stats(
             "position": nees_stats(nees(pose[b, :, :2], pose_cov[b, :, :2, :2], truth[:, :2]), 2),
         }
     return result
+
+
+#: A waypoint is reached when the true position comes this close to it, m (the accuracy
+#: threshold of the Fox-Burgard-Thrun recovery protocol: the robot is where it means to be
+#: up to its localisation).
+WAYPOINT_REACHED_M = 0.45
+
+
+def route_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
+    """How the true robot followed its route: the pose it steered on (``follow``), the
+    distance from its true position to the route's polyline (start, waypoints, back to the
+    first waypoint when looping; mean and max, m), the waypoints reached in order (within
+    :data:`WAYPOINT_REACHED_M`), the laps done (looping routes) and, for a route that ends,
+    whether its last waypoint was reached. Without a route: ``follow`` only."""
+    stats: dict[str, Any] = {"follow": str(spec.follow)}
+    if not isinstance(spec.plan, Route):
+        return stats
+    waypoints, loop = spec.plan.waypoints_m, spec.plan.loop
+    path = np.vstack(
+        [np.array(spec.start_pose[:2])[None], waypoints, *([waypoints[:1]] if loop else [])]
+    )
+    legs = [(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)]
+    points = log.pose[:, :2]
+    to_path = (
+        np.min([point_segment_distance(points, a, b) for a, b in legs], axis=0)
+        if legs
+        else np.linalg.norm(points - path[0], axis=1)
+    )
+    near = np.linalg.norm(points[:, None, :] - waypoints[None], axis=2) <= WAYPOINT_REACHED_M
+    reached, sample = 0, 0
+    while True:  # one pass per waypoint reached: the next in order, after the previous
+        target = reached % len(waypoints) if loop else reached
+        if target >= len(waypoints):
+            break
+        later = np.flatnonzero(near[sample:, target])
+        if later.size == 0:
+            break
+        sample += int(later[0]) + 1  # the next waypoint is reached after this one
+        reached += 1
+    stats.update(
+        {
+            "path_error_m": {"mean": float(to_path.mean()), "max": float(to_path.max())},
+            "waypoints_reached": reached,
+            "laps": reached // len(waypoints) if loop else None,
+            "goal_reached": None if loop else reached == len(waypoints),
+        }
+    )
+    return stats

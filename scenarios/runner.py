@@ -1,16 +1,11 @@
-"""One run of a scenario, without I/O: the whole localisation pipeline of paper 002.
+"""One run of a scenario, without I/O: spec -> simulate -> pipeline -> summary.
 
 ``run_scenario(spec)``:
 
 1. simulates the scenario (``robotsim``): the truth and every sensor;
-2. dead-reckons at the sensor rate (100 Hz) with the nominal parameters only
-   (``localization.dead_reckoning``), two branches batched as one belief ``(2, 8)``: row 0
-   the UKF-only branch, row 1 the fused one, on the same sensor data;
-3. at every interval epoch (a sonar scan) pauses the dead reckoning, steps the interval
-   tracker (``scenarios.epochs`` over ``intervals.tracker``) and, when the epoch is
-   consistent, fuses the fused branch with the set (``localization.fusion``; the paper's
-   clamp of the position to the nearest point of the box by default);
-4. summarises (``scenarios.metrics``).
+2. runs the localisation pipeline of paper 002 on its sensor data (``scenarios.pipeline``:
+   the online localiser fed the samples in order);
+3. summarises (``scenarios.metrics``, ``scenarios.pipeline.estimation_summary``).
 
 Randomness comes from one ``numpy.random.Generator`` seeded with the scenario's seed, so the
 same spec gives the same log, estimates and summary. Wall times are kept apart (``timing``).
@@ -19,7 +14,6 @@ same spec gives the same log, estimates and summary. Wall times are kept apart (
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -27,75 +21,29 @@ from typing import Any
 import numpy as np
 
 from intervals.errors import IntervalBudgetError
-from intervals.sonar import SonarBelt
-from localization.dead_reckoning import (
-    DeadReckoning,
-    DeadReckoningNoise,
-    NominalRobot,
-    initial_belief,
-    odometry_data,
-)
-from localization.fusion import fuse
-from robotsim.simulation import KidnapEvent, SensorSuite, SimulationLog, simulate
+from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLog, simulate
 from robotsim.world import WorldParams
-from scenarios.epochs import EpochLog, EpochRunner
 from scenarios.errors import ScenarioError
-from scenarios.metrics import (
-    consistency_stats,
-    interval_stats,
-    rmse_heading_rad,
-    rmse_position_m,
-    summarize,
+from scenarios.metrics import route_stats, summarize
+from scenarios.pipeline import (
+    BRANCHES,
+    FUSED,
+    UKF_ONLY,
+    Estimation,
+    StageTimes,
+    Steering,
+    estimate,
+    estimation_summary,
+    gathered,
+    localizer_for,
 )
-from scenarios.spec import ScenarioSpec
+from scenarios.spec import Follow, ScenarioSpec
 
-#: The two dead-reckoning branches, in batch order.
-BRANCHES = ("ukf_only", "fused")
-UKF_ONLY, FUSED = 0, 1
-
-#: Standard deviations of the starting pose (m, m, rad): the scenario states where the robot
-#: starts, up to how well a person places it.
-START_POSE_STD = (0.02, 0.02, math.radians(1.0))
+#: What other modules take from here: the run, and the pipeline's records of it.
+__all__ = ["BRANCHES", "Estimation", "RunResult", "StageTimes", "run_scenario", "simulate_spec"]
 
 #: Share of the progress bar the simulation fills (the estimation fills the rest).
 SIMULATION_PROGRESS = 0.3
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Estimation:
-    """What the localisation pipeline produced for one run (N samples, E epochs).
-
-    ``pose (2, N, 3)`` and ``pose_cov (2, N, 3, 3)``: the branches' pose estimates and their
-    covariances at every sample (row order :data:`BRANCHES`; the fused row after the fusion
-    at the epoch samples); ``epochs``: the interval epochs; ``epoch_index (E,)``: their
-    sample indices; ``before (E, 3)``, ``after (E, 3)``: the fused branch's pose just before
-    and after the fusion; ``fused_box (E, 3, 2)``: the box the fusion used (the hull of the
-    outer boxes of the component nearest the estimate, as ``localization.fusion`` takes it;
-    NaN where the epoch does not clamp); ``component (E,)``: that component's label (-1: no
-    fusion at the epoch).
-    """
-
-    pose: np.ndarray
-    pose_cov: np.ndarray
-    epochs: EpochLog
-    epoch_index: np.ndarray
-    before: np.ndarray
-    after: np.ndarray
-    fused_box: np.ndarray
-    component: np.ndarray
-
-
-@dataclasses.dataclass(frozen=True)
-class StageTimes:
-    """Wall times of the stages of one run, seconds, and per-step figures."""
-
-    simulate_s: float
-    dead_reckoning_s: float
-    intervals_s: float
-    fusion_s: float
-    dr_step_us: np.ndarray
-    """Wall time per dead-reckoning step (both branches), one value per stretch between
-    epochs, microseconds."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,22 +93,43 @@ def run_scenario(
     """Simulate ``spec``, run the localisation pipeline on its sensor data, summarise.
 
     ``progress(fraction)`` is told the share of the run done (simulation, then epochs);
-    ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``).
+    ``kidnaps``: robots moved without odometry during the run (``robotsim.simulation``),
+    beside the scenario's own ``kidnap`` events.
     """
+    kidnaps = spec.kidnaps + tuple(kidnaps)
     start = time.perf_counter()
-    log = simulate_spec(
-        spec,
-        kidnaps=kidnaps,
-        progress=(lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None,
-    )
-    simulate_s = time.perf_counter() - start
+    simulation_progress = (lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None
     try:
-        estimation, times = estimate(spec, log, progress=progress)
+        if spec.follow == Follow.TRUTH:
+            log = simulate_spec(spec, kidnaps=kidnaps, progress=simulation_progress)
+            simulate_s = time.perf_counter() - start
+            estimation, times = estimate(
+                spec,
+                log,
+                progress=(
+                    (lambda f: progress(SIMULATION_PROGRESS + (1.0 - SIMULATION_PROGRESS) * f))
+                    if progress
+                    else None
+                ),
+            )
+        else:  # closed loop: the simulator and the localiser stepped together
+            localizer = localizer_for(spec)
+            branch = UKF_ONLY if spec.follow == Follow.UKF_ONLY else FUSED
+            log = simulate_spec(
+                spec,
+                kidnaps=kidnaps,
+                progress=progress,
+                observer=Steering(localizer, branch),
+            )
+            estimation, times = gathered(localizer, log)
+            estimation_s = times.dead_reckoning_s + times.intervals_s + times.fusion_s
+            simulate_s = time.perf_counter() - start - estimation_s
     except IntervalBudgetError as exc:  # a precision too fine for the map, met at run time
         raise ScenarioError(spec.source, "estimation.eps_m", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
+    summary["route"] = route_stats(spec, log)
     return RunResult(
         log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s
     )
@@ -170,8 +139,10 @@ def simulate_spec(
     spec: ScenarioSpec,
     kidnaps: tuple[KidnapEvent, ...] = (),
     progress: Callable[[float], None] | None = None,
+    observer: Observer | None = None,
 ) -> SimulationLog:
-    """The simulator run ``spec`` describes, its randomness seeded by the spec's seed."""
+    """The simulator run ``spec`` describes, its randomness seeded by the spec's seed
+    (``observer``: the estimator the controller steers on, None for the true pose)."""
     sensors = spec.sensors
     return simulate(
         spec.map,
@@ -189,151 +160,5 @@ def simulate_spec(
         world=WorldParams(step_hz=spec.run.rate_hz),
         kidnaps=kidnaps,
         progress=progress,
+        observer=observer,
     )
-
-
-def dead_reckoning_noise(spec: ScenarioSpec) -> DeadReckoningNoise:
-    """The filter's noise model from the sensors' declared (datasheet) figures.
-
-    The encoder increment error is the quantisation (``1/sqrt(6)`` tick) plus the declared
-    slip at full speed; figures declared as 0 get a floor of 1e-9 (the filter needs
-    positive variances).
-    """
-    s, robot = spec.sensors, spec.robot
-    ticks_at_v_max = (
-        robot.v_max_m_s
-        / (2.0 * math.pi * robot.wheel_radius_m)
-        * robot.ticks_per_rev
-        / spec.run.rate_hz
-    )
-    floor = 1e-9
-    return DeadReckoningNoise(
-        tick_std=math.hypot(1.0 / math.sqrt(6.0), s.encoders.slip_std * ticks_at_v_max),
-        gyro_noise_density_rad_s_sqrt_hz=max(s.gyro.noise_density_rad_s_sqrt_hz, floor),
-        gyro_bias_std_rad_s=max(s.gyro.turn_on_bias_std_rad_s, floor),
-        gyro_bias_random_walk_rad_s_sqrt_s=max(s.gyro.bias_random_walk_rad_s_sqrt_s, floor),
-        accel_noise_density_m_s2_sqrt_hz=max(s.accelerometer.noise_density_m_s2_sqrt_hz, floor),
-        accel_bias_std_m_s2=max(s.accelerometer.turn_on_bias_std_m_s2, floor),
-        accel_bias_random_walk_m_s2_sqrt_s=max(s.accelerometer.bias_random_walk_m_s2_sqrt_s, floor),
-        yaw_accel_std_rad_s2=robot.alpha_max_rad_s2,
-    )
-
-
-def estimate(
-    spec: ScenarioSpec, log: SimulationLog, progress: Callable[[float], None] | None = None
-) -> tuple[Estimation, StageTimes]:
-    """Dead reckoning on both branches, an interval epoch at the chosen scans, the fusion.
-
-    The estimator sees only the sensor arrays, the nominal robot parameters and the
-    scenario's start pose; the true poses at the scans are used afterwards, for the
-    containment figure only.
-    """
-    est = spec.estimation
-    robot = spec.robot
-    nominal = NominalRobot(robot.wheel_radius_m, robot.wheel_base_m, robot.ticks_per_rev)
-    noise = dead_reckoning_noise(spec)
-    data = odometry_data(
-        log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2, 1.0 / log.rate_hz, nominal, noise
-    )
-    dr = DeadReckoning(
-        data, initial_belief(spec.start_pose, START_POSE_STD, noise), est.dead_reckoning
-    )
-
-    belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    epochs = EpochRunner(est.intervals, spec.map.segments, spec.map.boundary, spec.map.bounds, belt)
-    stride = est.scan_stride(spec.sensors.sonar.rate_hz)
-    scans = np.arange(0, len(log.sonar_t_s), stride)
-    epoch_index = np.searchsorted(log.t_s, log.sonar_t_s[scans] - 0.5 / log.rate_hz)
-
-    results, before, after, boxes, chosen = [], [], [], [], []
-    fuse_s = 0.0
-    clock = _DeadReckoningClock(dr)
-    last_t = log.sonar_t_s[scans[0]] if len(scans) else 0.0
-    for count, (scan, index) in enumerate(zip(scans, epoch_index, strict=True)):
-        belief = clock.run(int(index))
-        found = epochs.step(log.sonar_range_m[scan], float(log.sonar_t_s[scan] - last_t))
-        last_t = log.sonar_t_s[scan]
-        tick = time.perf_counter()
-        before.append(np.array(belief.mean[FUSED, :3]))
-        box, component = np.full((3, 2), np.nan), -1
-        if found.consistent:
-            outer, labels = found.outer, found.components()[1]
-            belief, report = fuse(belief, outer, labels, rows=(FUSED,), rule=est.fusion)
-            dr.replace(belief)
-            component, box = int(report.component[0]), report.hull[0]
-        after.append(np.array(belief.mean[FUSED, :3]))
-        boxes.append(box)
-        chosen.append(component)
-        results.append(found)
-        fuse_s += time.perf_counter() - tick
-        if progress:
-            progress(SIMULATION_PROGRESS + (1.0 - SIMULATION_PROGRESS) * (count + 1) / len(scans))
-    clock.run(data.count - 1)
-    history = dr.history
-    empty = np.zeros((0, 3))
-    estimation = Estimation(
-        pose=np.ascontiguousarray(history.mean[:, :, :3].swapaxes(0, 1)),
-        pose_cov=np.ascontiguousarray(history.pose_cov.swapaxes(0, 1)),
-        epochs=EpochLog.collect(log.sonar_t_s[scans], results, log.sonar_pose[scans]),
-        epoch_index=epoch_index.astype(np.int64),
-        before=np.array(before) if before else empty,
-        after=np.array(after) if after else empty,
-        fused_box=np.array(boxes) if boxes else np.zeros((0, 3, 2)),
-        component=np.array(chosen, dtype=np.int64),
-    )
-    ia_s = float(estimation.epochs.elapsed_s.sum())
-    times = StageTimes(0.0, clock.total_s, ia_s, fuse_s, np.array(clock.step_us))
-    return estimation, times
-
-
-class _DeadReckoningClock:
-    """Runs the dead reckoning stretch by stretch and times it (total, and per step)."""
-
-    def __init__(self, dr: DeadReckoning):
-        self._dr = dr
-        self.total_s = 0.0
-        self.step_us: list[float] = []
-
-    def run(self, index: int):
-        """Advance to sample ``index``; returns the belief there."""
-        steps = index - self._dr.index
-        tick = time.perf_counter()
-        belief = self._dr.run(index)
-        elapsed = time.perf_counter() - tick
-        self.total_s += elapsed
-        if steps > 0:
-            self.step_us.append(elapsed / steps * 1e6)
-        return belief
-
-
-def estimation_summary(log: SimulationLog, estimation: Estimation) -> dict[str, Any]:
-    """The estimation figures of the summary: RMSE of both branches over every sample, the
-    interval figures, and how the fusion went (deterministic)."""
-    truth = log.pose
-    rmse_pos = {name: rmse_position_m(estimation.pose[b], truth) for b, name in enumerate(BRANCHES)}
-    rmse_head = {
-        name: rmse_heading_rad(estimation.pose[b], truth) for b, name in enumerate(BRANCHES)
-    }
-    clamped = estimation.component >= 0
-    moved = np.any(estimation.after[:, :2] != estimation.before[:, :2], axis=1)
-    in_box = _in_box(estimation.after[clamped, :2], estimation.fused_box[clamped, :2])
-    summary = {
-        "rmse_position_m": rmse_pos,
-        "rmse_heading_rad": rmse_head,
-        "fused_to_ukf_only_position_rmse": rmse_pos["fused"] / rmse_pos["ukf_only"]
-        if rmse_pos["ukf_only"] > 0
-        else None,
-        "nees": consistency_stats(estimation.pose, estimation.pose_cov, truth, BRANCHES),
-        **interval_stats(estimation.epochs),
-        "fusion": {
-            "clamped_epochs": int(clamped.sum()),
-            "moved_epochs": int(np.count_nonzero(moved & clamped)),
-            "fused_in_box": bool(in_box.all()),
-        },
-    }
-    return summary
-
-
-def _in_box(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """``(P,)``: point ``p (2,)`` lies in the closed box ``(2, 2)`` of the same row."""
-    return np.all((boxes[..., 0] <= points) & (points <= boxes[..., 1]), axis=-1)

@@ -23,7 +23,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     Either ``waypoints_m`` (an array of ``[x, y]``, followed by pure pursuit; the other keys
     are the fields of ``robotsim.control.Route``) or ``[[route.profile]]`` steps
     ``{duration_s, v_m_s, omega_rad_s | omega_deg_s}`` played in order, then a stop. Without
-    a route the robot stands still.
+    a route the robot stands still. ``follow`` (:class:`Follow`, ``"truth"``): the pose the
+    pure pursuit steers on, the true one or, closed loop, the estimate of a localisation
+    branch (waypoints only: a profile ignores the pose).
 ``[sensors.encoders]``, ``[sensors.gyro]``, ``[sensors.accelerometer]``, ``[sensors.sonar]``
     The fields of the simulator's sensor parameter classes; for the sonar also ``count``
     (an even belt on the robot's rim, the default) in place of ``mount_xy`` and
@@ -31,6 +33,11 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     name with ``_deg`` in place of ``_rad`` (``half_aperture_deg``); never both. The sonar's
     ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
     sample; a faster or off-beat sonar is refused rather than silently slowed).
+``[[events]]``
+    Things that happen to the robot during the run, each ``{kind, t_s, ...}`` with ``t_s``
+    in ``(0, duration_s]`` (:class:`EventKind`): ``kind = "kidnap"`` moves the robot at
+    ``t_s`` to ``xy_m`` (required) and ``heading_deg`` (0.0) without odometry; the pose must
+    be free, and two kidnaps may not fall on one sample.
 ``[estimation]``
     The localisation pipeline (paper 002), read into the records of the packages that use
     it: ``filter`` (``localization.dead_reckoning.DeadReckoningSettings``: ``"ukf"``; or
@@ -60,7 +67,7 @@ import tomllib
 import types
 import typing
 from collections.abc import Callable
-from enum import Enum
+from enum import Enum, StrEnum
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -78,6 +85,7 @@ from robotsim.robot import RobotParams, wrap_angle
 from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
+from robotsim.simulation import KidnapEvent
 from robotsim.world import World
 from scenarios.errors import ScenarioError
 from scenarios.feasibility import check_feasible
@@ -122,6 +130,25 @@ TRACKER_KEYS = (
     "imagesp_pitch_m",
     "ray_test",
 )
+
+
+class Follow(StrEnum):
+    """The pose the route's controller steers on (``[route] follow``)."""
+
+    TRUTH = "truth"
+    """The true pose: the estimator runs beside the motion without steering it (studying
+    the estimator alone)."""
+    ESTIMATE = "estimate"
+    """Closed loop on the fused branch (dead reckoning fused with the interval sets)."""
+    UKF_ONLY = "ukf_only"
+    """Closed loop on the UKF-only branch (dead reckoning alone: it drifts)."""
+
+
+class EventKind(StrEnum):
+    """What an ``[[events]]`` entry does."""
+
+    KIDNAP = "kidnap"
+    """The robot moved to another pose without the wheels turning (no odometry of the jump)."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -256,8 +283,16 @@ class ScenarioSpec:
     """What the robot is told to do: a ``Route`` (pure pursuit) or a ``ScriptedProfile``."""
     sensors: SensorsSpec
     estimation: EstimationSpec
+    follow: Follow = Follow.TRUTH
+    """The pose the route's controller steers on (:class:`Follow`)."""
+    kidnaps: tuple[KidnapEvent, ...] = ()
+    """The ``kidnap`` events, in time order."""
 
     def __post_init__(self) -> None:
+        if self.follow != Follow.TRUTH and not isinstance(self.plan, Route):
+            raise ScenarioError(
+                self.source, "route.follow", "a closed loop needs waypoints_m (a route)"
+            )
         problem = estimation_problem(self.estimation, self.robot, self.sensors.sonar)
         if problem is not None:
             key, reason = problem
@@ -329,6 +364,14 @@ def parse_scenario(
     )
 
 
+def scenario_from_tables(
+    data: dict[str, Any], *, source: str, base_dir: Path, name: str
+) -> ScenarioSpec:
+    """Validate a scenario already read into tables (``tomllib``'s dict), as
+    :func:`parse_scenario` does its text (a replay swaps the ``[estimation]`` table)."""
+    return _from_dict(data, source=source, base_dir=base_dir, name=name)
+
+
 def _load_file(path: Path, *, name: str, source: str) -> ScenarioSpec:
     try:
         text = path.read_text(encoding="utf-8")
@@ -352,9 +395,12 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         float(wrap_angle(math.radians(heading_deg))),
     )
     _check_start(robot_table, segment_map, start_pose, robot)
-    plan = _read_route(top.take_table("route"), segment_map, robot)
+    route_table = top.take_table("route")
+    follow = Follow(route_table.take_str("follow", str(Follow.TRUTH), choices=choices(Follow)))
+    plan = _read_route(route_table, segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar)
+    kidnaps = _read_events(top.take_tables("events"), segment_map, robot, run)
     top.finish()
     return ScenarioSpec(
         name=name,
@@ -367,6 +413,8 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         plan=plan,
         sensors=sensors,
         estimation=estimation,
+        follow=follow,
+        kidnaps=kidnaps,
     )
 
 
@@ -472,6 +520,30 @@ def _check_start(
         World(segment_map, robot, pose)
     except RobotsimError as exc:
         raise table.error("start_xy_m", str(exc)) from None
+
+
+def _read_events(
+    tables: list[Table], segment_map: SegmentMap, robot: RobotParams, run: RunSpec
+) -> tuple[KidnapEvent, ...]:
+    """The ``[[events]]`` entries (module docstring), checked: a time inside the run, a free
+    pose (the simulator's own check), one kidnap per sample."""
+    kidnaps: dict[int, KidnapEvent] = {}
+    for table in tables:
+        EventKind(table.take_str("kind", choices=choices(EventKind)))
+        t_s = table.take_float("t_s", above=0.0, maximum=run.duration_s)
+        xy = table.take_array("xy_m", (2,))
+        heading_deg = table.take_float("heading_deg", 0.0)
+        table.finish()
+        pose = (float(xy[0]), float(xy[1]), float(wrap_angle(math.radians(heading_deg))))
+        try:
+            World(segment_map, robot, pose)
+        except RobotsimError as exc:
+            raise table.error("xy_m", str(exc)) from None
+        sample = math.ceil(t_s * run.rate_hz - 1e-9)  # the simulator's rule
+        if sample in kidnaps:
+            raise table.error("t_s", f"another kidnap falls on the same sample ({sample})")
+        kidnaps[sample] = KidnapEvent(t_s, pose)
+    return tuple(kidnaps[sample] for sample in sorted(kidnaps))
 
 
 def _read_route(table: Table, segment_map: SegmentMap, robot: RobotParams) -> Plan:

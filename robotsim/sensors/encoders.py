@@ -52,7 +52,13 @@ def simulate_ticks(
 ) -> np.ndarray:
     """Integer tick increments ``(N, 2)`` int64 from wheel rotations per sample ``(N, 2)``."""
     rotation = np.asarray(rotation_rad, dtype=np.float64)
-    slip = rng.standard_normal(rotation.shape)
-    turned = rotation * (1.0 + params.slip_std * slip)
+    return ticks_from_slip(rotation, ticks_per_rev, params, rng.standard_normal(rotation.shape))
+
+
+def ticks_from_slip(rotation_rad, ticks_per_rev: int, params: EncoderParams, slip) -> np.ndarray:
+    """Tick increments ``(N, 2)`` int64 from wheel rotations ``(N, 2)`` and standard normal
+    slip draws ``(N, 2)``: each rotation scaled by ``1 + slip_std slip``, the cumulative turn
+    counted in whole ticks, differenced."""
+    turned = np.asarray(rotation_rad, dtype=np.float64) * (1.0 + params.slip_std * slip)
     count = np.floor(np.cumsum(turned, axis=0) * (ticks_per_rev / (2.0 * np.pi)))
-    return np.diff(count, axis=0, prepend=np.zeros((1, rotation.shape[1]))).astype(np.int64)
+    return np.diff(count, axis=0, prepend=np.zeros((1, turned.shape[1]))).astype(np.int64)

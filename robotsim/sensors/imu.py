@@ -54,6 +54,27 @@ class AccelerometerParams:
         validate_fields(self, RobotsimError)
 
 
+def axis_noise(
+    shape: tuple[int, ...],
+    noise_density: float,
+    turn_on_bias_std: float,
+    bias_random_walk: float,
+    rate_hz: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The bias and the white noise ``shape = (N, ...)`` of axes sampled at ``rate_hz`` (time
+    first; every other element an independent axis with its own bias): a turn-on value plus a
+    random walk, and the white noise of density ``noise_density``. They do not depend on the
+    motion, so they can be drawn before it (the closed loop reads them sample by sample)."""
+    axes = shape[1:]
+    turn_on = rng.standard_normal(axes) * turn_on_bias_std
+    steps = rng.standard_normal(shape) * (bias_random_walk / math.sqrt(rate_hz))
+    steps[0] = 0.0
+    bias = turn_on + np.cumsum(steps, axis=0)
+    white = rng.standard_normal(shape) * (noise_density * math.sqrt(rate_hz))
+    return bias, white
+
+
 def simulate_axes(
     truth,
     noise_density: float,
@@ -62,16 +83,40 @@ def simulate_axes(
     rate_hz: float,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Measurements and bias, both shaped like ``truth (N, ...)`` (time first; every other
-    element is an independent axis with its own bias). Units are those of ``truth``."""
+    """Measurements ``truth + bias + white`` and bias, both shaped like ``truth (N, ...)``
+    (:func:`axis_noise`). Units are those of ``truth``."""
     truth = np.asarray(truth, dtype=np.float64)
-    axes = truth.shape[1:]
-    turn_on = rng.standard_normal(axes) * turn_on_bias_std
-    steps = rng.standard_normal(truth.shape) * (bias_random_walk / math.sqrt(rate_hz))
-    steps[0] = 0.0
-    bias = turn_on + np.cumsum(steps, axis=0)
-    white = rng.standard_normal(truth.shape) * (noise_density * math.sqrt(rate_hz))
+    bias, white = axis_noise(
+        truth.shape, noise_density, turn_on_bias_std, bias_random_walk, rate_hz, rng
+    )
     return truth + bias + white, bias
+
+
+def gyro_noise(count: int, params: GyroParams, rate_hz: float, rng: np.random.Generator):
+    """Bias and white noise ``(N,)`` rad/s of the gyro (as :func:`simulate_gyro` draws them)."""
+    return axis_noise(
+        (count,),
+        params.noise_density_rad_s_sqrt_hz,
+        params.turn_on_bias_std_rad_s,
+        params.bias_random_walk_rad_s_sqrt_s,
+        rate_hz,
+        rng,
+    )
+
+
+def accelerometer_noise(
+    count: int, params: AccelerometerParams, rate_hz: float, rng: np.random.Generator
+):
+    """Bias and white noise ``(N, 2)`` m/s^2 of the accelerometer (as
+    :func:`simulate_accelerometer` draws them)."""
+    return axis_noise(
+        (count, 2),
+        params.noise_density_m_s2_sqrt_hz,
+        params.turn_on_bias_std_m_s2,
+        params.bias_random_walk_m_s2_sqrt_s,
+        rate_hz,
+        rng,
+    )
 
 
 def simulate_gyro(omega_rad_s, params: GyroParams, rate_hz: float, rng: np.random.Generator):

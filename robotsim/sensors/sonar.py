@@ -249,11 +249,29 @@ def simulate_readings(
         bool mask of faulty readings (outliers and lost echoes; truth, for tests only).
     """
     d = np.asarray(true_distance_m, dtype=np.float64)
-    unit_error = rng.uniform(-1.0, 1.0, size=d.shape)
-    lost_draw = rng.random(size=d.shape)
-    outlier_draw = rng.random(size=d.shape)
-    outlier_value = rng.uniform(0.0, params.d_max_m, size=d.shape)
+    return readings_from_draws(d, params, sonar_draws(d.shape, params, rng))
 
+
+def sonar_draws(
+    shape: tuple[int, ...], params: SonarBeltParams, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The random arrays of :func:`simulate_readings`, each ``shape``: the unit error in
+    ``[-1, 1]``, the lost-echo and outlier draws in ``[0, 1)``, the outlier value in
+    ``[0, d_max_m]``. They do not depend on the motion (the closed loop draws them first)."""
+    return (
+        rng.uniform(-1.0, 1.0, size=shape),
+        rng.random(size=shape),
+        rng.random(size=shape),
+        rng.uniform(0.0, params.d_max_m, size=shape),
+    )
+
+
+def readings_from_draws(
+    d: np.ndarray, params: SonarBeltParams, draws: tuple[np.ndarray, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Readings and fault mask from true cone distances ``d`` and :func:`sonar_draws` of the
+    same shape (the error model of :func:`simulate_readings`)."""
+    unit_error, lost_draw, outlier_draw, outlier_value = draws
     echo = d <= params.d_max_m
     bound = params.error_abs_bound_m + params.error_rel_bound * np.where(echo, d, 0.0)
     readings = np.where(echo, np.maximum(np.where(echo, d, 0.0) + unit_error * bound, 0.0), np.inf)

@@ -39,14 +39,8 @@ import numpy as np
 from intervals.tracker import Tracker
 from scenarios.commands import with_run_options
 from scenarios.outputs import atomic_directory, write_json, write_text
-from scenarios.runner import (
-    FUSED,
-    UKF_ONLY,
-    Estimation,
-    estimate,
-    estimation_summary,
-    simulate_spec,
-)
+from scenarios.pipeline import FUSED, UKF_ONLY, Estimation, estimate, estimation_summary
+from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario
 
 HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP trackers on hall (table, figures 7-9)"

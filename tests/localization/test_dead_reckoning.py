@@ -34,7 +34,8 @@ from robotsim.maps import builtin_map
 from robotsim.robot import RobotParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.simulation import SensorSuite, simulate
-from scenarios.runner import START_POSE_STD, dead_reckoning_noise, simulate_spec
+from scenarios.pipeline import START_POSE_STD, dead_reckoning_noise
+from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario
 
 HALL = builtin_map("hall")

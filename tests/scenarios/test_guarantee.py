@@ -20,7 +20,8 @@ import pytest
 from robotsim.simulation import KidnapEvent
 from scenarios.cli import main
 from scenarios.epochs import GLOBAL, INCONSISTENT, LOST, TRACKING
-from scenarios.runner import FUSED, estimate, estimation_summary, run_scenario, simulate_spec
+from scenarios.pipeline import FUSED, estimate, estimation_summary
+from scenarios.runner import run_scenario, simulate_spec
 from scenarios.spec import builtin_names, load_scenario
 
 SHORT_S = 15.0

@@ -105,7 +105,7 @@ def test_the_ukf_only_branch_never_sees_the_boxes(hall_runs):
         initial_belief,
         odometry_data,
     )
-    from scenarios.runner import START_POSE_STD, dead_reckoning_noise
+    from scenarios.pipeline import START_POSE_STD, dead_reckoning_noise
 
     run = hall_runs[0]
     spec = load_scenario("hall").with_run(duration_s=20.0)

@@ -270,6 +270,16 @@ BAD = {
         "outside",
     ),
     "run not a table": ("run = 5\n", "run", "must be a table"),
+    "follow not a choice": (
+        "[route]\nwaypoints_m = [[5, 2]]\nfollow = 'map'\n",
+        "route.follow",
+        "must be one of 'truth', 'estimate', 'ukf_only'",
+    ),
+    "follow without waypoints": (
+        "[route]\nfollow = 'estimate'\n[[route.profile]]\nduration_s = 1\nv_m_s = 0.1\nomega_rad_s = 0\n",
+        "route.follow",
+        "needs waypoints_m",
+    ),
 }
 
 

@@ -1,0 +1,99 @@
+"""The closed loop: the controller steered on the localiser's estimate, the simulator and the
+localiser stepped together; the summary says how the route was followed."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+
+from scenarios.metrics import WAYPOINT_REACHED_M, route_stats
+from scenarios.pipeline import FUSED, Steering, estimate, gathered, localizer_for
+from scenarios.runner import run_scenario, simulate_spec
+from scenarios.spec import Follow, load_scenario
+
+
+def closed(name: str, follow: Follow, seed: int = 0, duration_s: float = 60.0):
+    spec = load_scenario(name).with_run(seed=seed, duration_s=duration_s)
+    return dataclasses.replace(spec, follow=follow)
+
+
+class Recorder(Steering):
+    """The pipeline's observer, keeping what the simulator handed it."""
+
+    def __init__(self, localizer, branch):
+        super().__init__(localizer, branch)
+        self.samples, self.scans, self.poses = [], [], []
+
+    def odometry(self, t_s, ticks, gyro_rad_s, accel_m_s2):
+        self.samples.append((t_s, np.array(ticks), gyro_rad_s, np.array(accel_m_s2)))
+        super().odometry(t_s, ticks, gyro_rad_s, accel_m_s2)
+
+    def scan(self, t_s, readings_m):
+        self.scans.append((t_s, np.array(readings_m)))
+        super().scan(t_s, readings_m)
+
+    def pose(self):
+        pose = super().pose()
+        self.poses.append(pose)
+        return pose
+
+
+def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
+    spec = closed("hall", Follow.ESTIMATE, seed=2, duration_s=20.0)
+    localizer = localizer_for(spec)
+    observer = Recorder(localizer, FUSED)
+    log = simulate_spec(spec, observer=observer)
+    # what the loop handed over, sample by sample, is what the vectorised pass logged
+    np.testing.assert_array_equal([s[0] for s in observer.samples], log.t_s)
+    np.testing.assert_array_equal([s[1] for s in observer.samples], log.wheel_ticks)
+    np.testing.assert_array_equal([s[2] for s in observer.samples], log.gyro_rad_s)
+    np.testing.assert_array_equal([s[3] for s in observer.samples], log.accel_m_s2)
+    np.testing.assert_array_equal([s[0] for s in observer.scans], log.sonar_t_s)
+    np.testing.assert_array_equal([s[1] for s in observer.scans], log.sonar_range_m)
+    # so the online estimates equal the pipeline run afterwards on the finished log
+    online, _ = gathered(localizer, log)
+    after, _ = estimate(spec, log)
+    np.testing.assert_array_equal(online.pose, after.pose)
+    # the controller was fed the fused estimate one sample late (the first: the start pose)
+    assert len(observer.poses) == len(log.t_s) - 1  # no step follows the last sample
+    np.testing.assert_array_equal(observer.poses[1:], online.pose[FUSED, :-2])
+    np.testing.assert_allclose(observer.poses[0], spec.start_pose)
+    # and it matters: the true path differs from the run steered on the truth
+    truth = simulate_spec(dataclasses.replace(spec, follow=Follow.TRUTH))
+    assert not np.array_equal(truth.pose, log.pose)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "seed"), [("hall", 0), ("hall", 1), ("office", 0), ("office", 1)])
+def test_steering_on_the_fused_estimate_keeps_the_guarantee_and_the_route(name, seed):
+    on_truth = run_scenario(closed(name, Follow.TRUTH, seed)).summary
+    on_estimate = run_scenario(closed(name, Follow.ESTIMATE, seed)).summary
+    assert on_estimate["containment"] == 1.0
+    assert on_estimate["walls"]["contact_samples"] == 0
+    assert on_estimate["walls"]["pymunk_contact_steps"] == 0
+    route = on_estimate["route"]
+    assert route["follow"] == "estimate"
+    assert route["waypoints_reached"] >= on_truth["route"]["waypoints_reached"] - 1 >= 1
+    assert route["path_error_m"]["max"] < 0.5
+
+
+def test_route_stats_against_a_direct_computation():
+    spec = closed("hall", Follow.TRUTH, duration_s=40.0)
+    log = simulate_spec(spec)
+    stats = route_stats(spec, log)
+    waypoints = spec.plan.waypoints_m
+    path = np.array([spec.start_pose[:2], *waypoints, waypoints[0]])
+    points = log.pose[:, :2]
+    distance = np.full(len(points), np.inf)
+    for a, b in itertools.pairwise(path):  # the distance to each leg, by projection
+        t = np.clip((points - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+        distance = np.minimum(distance, np.hypot(*(points - (a + t[:, None] * (b - a))).T))
+    assert stats["path_error_m"]["max"] == pytest.approx(distance.max(), rel=1e-9)
+    assert stats["path_error_m"]["mean"] == pytest.approx(distance.mean(), rel=1e-9)
+    first = np.linalg.norm(log.pose[:, :2] - waypoints[0], axis=1).min()
+    assert (stats["waypoints_reached"] >= 1) == (first <= WAYPOINT_REACHED_M)
+    assert stats["laps"] == stats["waypoints_reached"] // len(waypoints)
+    assert stats["goal_reached"] is None  # a looping route has no goal
