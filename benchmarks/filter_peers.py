@@ -168,6 +168,8 @@ def filterpy_ukf_run(p: Problem, z, initial, wrapped: bool = True):
 class _CTRVFilterpyEKF(FilterpyEKF):
     """filterpy's EKF with a nonlinear transition through ``predict_x`` (its documented hook)."""
 
+    x: np.ndarray  # (5,) the state mean, filterpy's attribute
+
     def __init__(self, dt_s: float, wrapped: bool):
         super().__init__(dim_x=5, dim_z=3)
         self.dt_s, self.wrapped = dt_s, wrapped

@@ -57,7 +57,7 @@ from collections.abc import Callable
 from functools import partial
 
 import numpy as np
-from _common import best_seconds, machine_line, markdown_table, write_section
+from _common import machine_line, markdown_table, write_section
 from filter_peers import (
     Problem,
     ctrv_F,
@@ -316,17 +316,21 @@ def time_all(
     zc = unwrap_heading(z, initial)
     steps = z.shape[1]
     figures: dict[str, tuple[Callable[[int], object], int]] = {}
+
+    def one_run(filt, compiled: bool) -> Callable[[int], object]:
+        return lambda rep: run_ours(filt, z[rep % runs], initial[rep % runs], compiled)
+
+    def all_runs(filt, compiled: bool) -> Callable[[int], object]:
+        return lambda rep: run_ours(filt, z, initial, compiled)
+
+    def peer_run(name: str) -> Callable[[int], object]:
+        return lambda rep: run_peer(name, z, zc, initial, rep % runs)
+
     for name, (filt, compiled) in ours().items():
-        figures[f"ours {name} single"] = (
-            lambda rep, f=filt, c=compiled: run_ours(f, z[rep % runs], initial[rep % runs], c),
-            steps,
-        )
-        figures[f"ours {name} batched"] = (
-            lambda rep, f=filt, c=compiled: run_ours(f, z, initial, c),
-            steps * z.shape[0],
-        )
+        figures[f"ours {name} single"] = (one_run(filt, compiled), steps)
+        figures[f"ours {name} batched"] = (all_runs(filt, compiled), steps * z.shape[0])
     for name in PEERS:
-        figures[name] = (lambda rep, n=name: run_peer(n, z, zc, initial, rep % runs), steps)
+        figures[name] = (peer_run(name), steps)
     before = os.getloadavg()[0]
     us = interleaved_medians(figures, repeats)
     return us, (before, os.getloadavg()[0])
@@ -393,57 +397,53 @@ def floor_ukf_run(z: np.ndarray, initial: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def decompose_ukf_step(z: np.ndarray, initial: np.ndarray, repeats: int) -> list[list[str]]:
     """Where one UKF step goes, measured without a profiler: the whole step, the same step with a
-    free model (identity transition), and the library calls the step cannot avoid, timed alone
-    on the step's own array shapes. Rows ``[part, us per step]``."""
+    free model (identity transition), the same step as bare numpy/LAPACK calls, and the model
+    calls each filter makes, timed alone on the step's own array shapes; interleaved as in
+    :func:`interleaved_medians`. Rows ``[part, CPU us per step (median), wall us]``."""
     steps = z.shape[1]
     filt = UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA))
     free = ProcessModel(lambda x, dt_s: x, Q)
     measurement = our_models()[1]
+    points, x0 = np.tile(initial[0], (11, 1)), initial[0]
 
-    def free_run():
+    def free_run(rep: int) -> None:
         belief = Gaussian(initial[0], P0, angle_indices=(HEADING,))
         for k in range(steps):
             belief = filt.update(filt.predict(belief, free, DT_S), z[0, k], measurement)
 
-    def us(fn, number: int) -> float:
-        return best_seconds(fn, repeats, number) * 1e6
+    def calls(fn: Callable[[], object], number: int) -> tuple[Callable[[int], object], int]:
+        def loop(rep: int) -> None:
+            for _ in range(number):
+                fn()
 
-    points = np.tile(initial[0], (11, 1))
-    full = best_seconds(lambda: run_ours(filt, z[0], initial[0]), repeats) / steps * 1e6
-    compiled = (
-        best_seconds(lambda: run_ours(filt, z[0], initial[0], compiled=True), repeats) / steps * 1e6
+        return loop, number
+
+    us = interleaved_medians(
+        {
+            "compiled": (lambda rep: run_ours(filt, z[0], initial[0], compiled=True), steps),
+            "numpy": (lambda rep: run_ours(filt, z[0], initial[0]), steps),
+            "free": (free_run, steps),
+            "floor": (lambda rep: floor_ukf_run(z[0], initial[0]), steps),
+            "ctrv 11": calls(lambda: ctrv_transition(points, DT_S), 200),
+            "add": calls(lambda: P0 + P0, 5000),
+            "fx 11": calls(lambda: [ctrv_fx(x0, DT_S) for _ in range(11)], 200),
+            "F + fx": calls(lambda: (ctrv_F(x0, DT_S), ctrv_fx(x0, DT_S)), 1000),
+            "ours F + f": calls(lambda: (ctrv_jacobian(x0, DT_S), ctrv_transition(x0, DT_S)), 200),
+        },
+        repeats,
     )
-    filter_only = best_seconds(free_run, repeats) / steps * 1e6
-    floor = best_seconds(lambda: floor_ukf_run(z[0], initial[0]), repeats) / steps * 1e6
-    ctrv_11 = us(lambda: ctrv_transition(points, DT_S), 200)
-    ctrv_1 = us(lambda: ctrv_transition(initial[0], DT_S), 200)
-    jacobian_1 = us(lambda: ctrv_jacobian(initial[0], DT_S), 200)
-    add = us(lambda: P0 + P0, 5000)
-    fx_1 = us(lambda: ctrv_fx(initial[0], DT_S), 2000)
-    f_1 = us(lambda: ctrv_F(initial[0], DT_S), 2000)
-    return [
-        ["our UKF step (predict + update), CTRV, compiled path", f"{compiled:.1f}"],
-        ["our UKF step (predict + update), CTRV, numpy path", f"{full:.0f}"],
-        ["the same step with a free model (the filter's own share)", f"{filter_only:.0f}"],
-        ["CTRV transition of the 11 sigma points, one call (the model's share)", f"{ctrv_11:.0f}"],
-        [
-            "the same step as bare numpy/LAPACK calls (`floor_ukf_run`: the floor of numpy)",
-            f"{floor:.0f}",
-        ],
-        ["one numpy ufunc call on 5x5 (`P + P`)", f"{add:.2f}"],
-        [
-            "a filterpy UKF step calls its scalar CTRV (`filter_peers.ctrv_fx`) 11 times: 11 x",
-            f"{11 * fx_1:.0f}",
-        ],
-        [
-            "a filterpy EKF step: its scalar `ctrv_F` + `ctrv_fx` on one state",
-            f"{f_1 + fx_1:.0f}",
-        ],
-        [
-            "our numpy EKF step: `ctrv_jacobian` + `ctrv_transition` on one state",
-            f"{jacobian_1 + ctrv_1:.0f}",
-        ],
-    ]
+    labels = {
+        "compiled": "our UKF step (predict + update), CTRV, compiled path",
+        "numpy": "our UKF step (predict + update), CTRV, numpy path",
+        "free": "the same numpy step with a free model (the filter's own share)",
+        "floor": "the same step as bare numpy/LAPACK calls (`floor_ukf_run`)",
+        "ctrv 11": "CTRV transition of the 11 sigma points, one call (our numpy model's share)",
+        "add": "one numpy ufunc call on 5x5 (`P + P`)",
+        "fx 11": "a filterpy UKF step's 11 calls of the user's scalar CTRV (`ctrv_fx`)",
+        "F + fx": "a filterpy EKF step's model: the user's scalar `ctrv_F` + `ctrv_fx`",
+        "ours F + f": "our numpy EKF step's model: `ctrv_jacobian` + `ctrv_transition`, one state",
+    }
+    return [[labels[name], f"{cpu:.2f}", f"{wall:.2f}"] for name, (wall, cpu) in us.items()]
 
 
 def _ratio(peer: tuple[float, float], mine: tuple[float, float]) -> str:
@@ -565,7 +565,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n{load}; our batched UKF: {per_second:,.0f} run-steps per second\n")
     print(times, ratios, targets, sep="\n\n")
     parts = markdown_table(
-        ["where the one-filter steps go (best of the repeats)", "us"],
+        ["where the one-filter steps go (interleaved medians)", "CPU us", "wall us"],
         decompose_ukf_step(z, initial, args.repeats),
     )
     print()
@@ -615,28 +615,40 @@ section gave filterpy our batched model function and our general `wrap_angle` as
 that flattered us (UKF 32.8x, batched 306x, EKF 6.8x then)."""
 
 ANALYSIS = """\
-Findings (the decomposition above; ``--profile`` gives the cProfile of our numpy step):
+Findings (ranges over the runs of 2026-12-01, each with the load noted above; two runs half an
+hour apart differed by up to 30 % in a ratio, wall and CPU ratios of one run by up to 25 %):
 
-- One filter: target met by the compiled path (``localization.compiled_ukf``): the whole
-  predict (or update) is one call of a compiled entry that loops over the sigma points in
-  scalar code, so a step pays two calls' overhead instead of some 75 numpy calls. What remains
-  of its time is mostly the Python glue of the two calls (argument checks, the belief objects),
-  not arithmetic. The numpy path (the reference, used when a model has no per-point kernel)
-  stays at about 4.5x: numpy's per-call cost on 5x5 arrays bounds it; ``floor_ukf_run``, the
-  same step as the fewest bare numpy/LAPACK calls we could write, still takes about 70 us.
-- Batched (1000 runs): both paths meet the target; filterpy has no batch mode and is looped
-  over runs. The compiled batch needs no slicing and allocates nothing per run.
-- filterpy's step is about 500 us, of which about 105 us are its 11 calls of
-  ``ctrv_transition`` on one state each (it evaluates sigma points one by one) and most of the
-  rest its Python loops over sigma points (residual and mean functions, outer products).
-- EKF (no target): the compiled path (``localization.compiled_ekf``: the model and its
-  Jacobian as per-point kernels, predict and Joseph-form update one compiled call each) takes
-  about 19 us a step, some 7x filterpy's EKF; like the compiled UKF, its time is mostly the
-  Python glue of the two calls. The numpy path is slightly slower than filterpy's on one filter:
-  both pay the same model (``ctrv_jacobian`` + ``ctrv_transition`` on one state, about 50 us),
-  and ours adds about 25 us more glue (the Joseph form built with ``np.eye`` and five matmuls,
-  ``np.linalg.solve``, the finiteness checks of every step). Batched, the compiled EKF reaches
-  about 100x filterpy looped, the numpy path about 35-60x.
+- UKF, one filter: our compiled path is 10-14x filterpy's faster setup (heading continuous,
+  its defaults) and 14-24x its wrapped setup: issue 7's 8x holds, issue 17's 40x does not. The
+  old setup showed 33x. filterpy's step (270-330 us CPU here) is its Python loop over the 11
+  sigma points: 11 calls of the user's scalar CTRV (about 60 us) and per-point residuals and
+  outer products; the user's wrapping callbacks add about 130 us. Our compiled step (25-32 us
+  CPU here, 14-21 us on an idle machine) is mostly the Python glue around its two compiled
+  calls (issue 17).
+- Stone Soup's UKF takes about 1 ms a step (its state, prediction and hypothesis objects,
+  timestamps and matrix views each step; the model is called once on all points): our
+  compiled UKF is 30-47x, our numpy path 8-11x.
+- The textbook numpy UKF (`textbook_ukf.py`, about 40 lines) takes 75-100 us CPU a step: only
+  3-4x our compiled path, and as fast as our numpy path (0.7-1.0x). On one filter our numpy
+  path's generality (belief objects and their checks, moments about the centre point, angle
+  handling, batch-safe LAPACK calls) costs what its fewer numpy calls save.
+- Batched (1000 runs in one call, against a peer's one-filter time per run-step): our compiled
+  UKF is 55-64x filterpy's faster setup, 80-111x its wrapped one, 190-220x Stone Soup's:
+  issue 7's 50x holds narrowly, issue 17's 150x does not. Under this load the batched
+  run-step costs 4.6-5.1 us CPU against 2.3 us wall on an idle machine (2026-11-22), a larger
+  inflation than the one-filter step's; the batched ratios measured here are likely low.
+- EKF: our compiled EKF is only 1.8-3.0x filterpy's EKF (47-57 us CPU a step: a few numpy
+  calls on 5x5 around the user's scalar model and Jacobian), and our numpy EKF is 3x slower
+  than filterpy's: its model calls alone (`ctrv_jacobian` + `ctrv_transition`, written for
+  batches) cost several times the user's scalar ones (table above). Stone Soup's EKF: 14-17x
+  our compiled one. Batched, our compiled EKF is 16-21x filterpy looped.
+- What changed from the previous figures (UKF 32.8x, batched 306x, EKF 6.8x, best of 3, one
+  side after the other): filterpy now gets callbacks a user would write (scalar `math` on one
+  state) instead of our batched model function and general `wrap_angle`, and its default
+  (continuous-heading) setup is measured too, which is faster still; the repetitions of all
+  filters alternate in one process and medians are kept, so load falls on every side alike.
+  The machine is also another one (Intel Xeon, 2 cores, heavily shared, where the earlier
+  figures were measured on an AMD EPYC).
 """
 
 
