@@ -611,8 +611,8 @@ the sigma points as its own models are. Heading: ours wraps it; filterpy runs bo
 (wrapped with the user's residual, mean and add functions; continuous with its defaults on
 unwrapped measurements); Stone Soup and the textbook UKF run continuous. Until 2026-11-22 this
 section gave filterpy our batched model function and our general `wrap_angle` as callbacks
-(about 300 of its 500-700 us a step) and timed the two sides one after the other, best of 3:
-that flattered us (UKF 32.8x, batched 306x, EKF 6.8x then)."""
+(about 170 and 190 us of a 440 us step, as measured for issue 17) and timed the two sides
+one after the other, best of 3: that flattered us (UKF 32.8x, batched 306x, EKF 6.8x then)."""
 
 ANALYSIS = """\
 Findings (ranges over the runs of 2026-12-01, each with the load noted above; two runs half an
@@ -621,26 +621,27 @@ hour apart differed by up to 30 % in a ratio, wall and CPU ratios of one run by 
 - UKF, one filter: our compiled path is 10-14x filterpy's faster setup (heading continuous,
   its defaults) and 14-24x its wrapped setup: issue 7's 8x holds, issue 17's 40x does not. The
   old setup showed 33x. filterpy's step (270-330 us CPU here) is its Python loop over the 11
-  sigma points: 11 calls of the user's scalar CTRV (about 60 us) and per-point residuals and
-  outer products; the user's wrapping callbacks add about 130 us. Our compiled step (25-32 us
-  CPU here, 14-21 us on an idle machine) is mostly the Python glue around its two compiled
+  sigma points: 11 calls of the user's scalar CTRV (about 40 us CPU) and per-point residuals
+  and outer products; the user's wrapping callbacks add 130-210 us. Our compiled step (25-33
+  us CPU here, 14-21 us on an idle machine) is mostly the Python glue around its two compiled
   calls (issue 17).
-- Stone Soup's UKF takes about 1 ms a step (its state, prediction and hypothesis objects,
-  timestamps and matrix views each step; the model is called once on all points): our
-  compiled UKF is 30-47x, our numpy path 8-11x.
-- The textbook numpy UKF (`textbook_ukf.py`, about 40 lines) takes 75-100 us CPU a step: only
-  3-4x our compiled path, and as fast as our numpy path (0.7-1.0x). On one filter our numpy
-  path's generality (belief objects and their checks, moments about the centre point, angle
-  handling, batch-safe LAPACK calls) costs what its fewer numpy calls save.
+- Stone Soup's UKF takes about 1 ms a step although its model is called once on all the
+  sigma points (not profiled here; each step builds state, prediction, detection and
+  hypothesis objects and matrix views): our compiled UKF is 30-47x, our numpy path 8-11x.
+- The textbook numpy UKF (`textbook_ukf.py`, about 40 lines) takes 75-107 us CPU a step: only
+  3-4x our compiled path, and slightly faster than our numpy path (it takes 0.7-1.0 of its
+  time; about what `floor_ukf_run` takes). On one filter our numpy path's generality (belief
+  objects and their checks, moments about the centre point, angle handling, batch-safe
+  LAPACK calls) costs a little more than its fewer numpy calls save.
 - Batched (1000 runs in one call, against a peer's one-filter time per run-step): our compiled
   UKF is 55-64x filterpy's faster setup, 80-111x its wrapped one, 190-220x Stone Soup's:
   issue 7's 50x holds narrowly, issue 17's 150x does not. Under this load the batched
-  run-step costs 4.6-5.1 us CPU against 2.3 us wall on an idle machine (2026-11-22), a larger
+  run-step costs 4.6-5.3 us CPU against 2.3 us wall on an idle machine (2026-11-22), a larger
   inflation than the one-filter step's; the batched ratios measured here are likely low.
 - EKF: our compiled EKF is only 1.8-3.0x filterpy's EKF (47-57 us CPU a step: a few numpy
   calls on 5x5 around the user's scalar model and Jacobian), and our numpy EKF is 3x slower
   than filterpy's: its model calls alone (`ctrv_jacobian` + `ctrv_transition`, written for
-  batches) cost several times the user's scalar ones (table above). Stone Soup's EKF: 14-17x
+  batches) cost about 8 times the user's scalar ones (table above). Stone Soup's EKF: 14-17x
   our compiled one. Batched, our compiled EKF is 16-21x filterpy looped.
 - What changed from the previous figures (UKF 32.8x, batched 306x, EKF 6.8x, best of 3, one
   side after the other): filterpy now gets callbacks a user would write (scalar `math` on one
