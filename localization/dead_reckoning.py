@@ -72,13 +72,13 @@ two uniform tick fractions, standard deviation ``1 / sqrt(6)`` tick (treated as 
 in fact anti-correlated, so the filter is conservative about it); the IMU white noise has the
 per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
 
-Speed: C's generic filter objects, step by step, take 190-380 us a step for the batch of two
+Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step, take 190-380 us a step for the batch of two
 branches (``ekf`` .. ``iukf``; 16 s for 600 s of ``ukf`` at 100 Hz, against a budget of 6 s
 for the whole pipeline). :class:`DeadReckoning` therefore runs a compiled step specialised
 to this model (:mod:`localization.dead_reckoning_kernel`, numba), still the same filter: the
 unscented prediction with the same sigma points and moments as the generic one (or the EKF
 prediction), and the closed-form update that equals the unscented one for the linear ``h``
-(``tests/localization/test_dead_reckoning.py`` checks it against C's filters: ~1e-13 for
+(``tests/localization/test_dead_reckoning.py`` checks it against the generic filter classes: ~1e-13 for
 the EKF and the kappa points; ~1e-8 over 300 steps for the scaled points, whose
 ``1 / gamma^2`` amplifies rounding, as between any two implementations). One call runs a
 whole ``run()`` stretch, all samples and all runs, and writes the history in place.
@@ -371,7 +371,7 @@ class OdometryData:
         return self.z.ndim == 3
 
     def process_model(self) -> ProcessModel:
-        """The model as C's filters consume it (additive noise, with its Jacobian)."""
+        """The model as the generic filter classes consume it (additive noise, with its Jacobian)."""
         return ProcessModel(transition, self.Q, jacobian=transition_jacobian)
 
     def measurement_model(self) -> MeasurementModel:
@@ -465,7 +465,7 @@ class StepEngine(StrEnum):
     COMPILED = "compiled"
     """The step specialised to this model (:mod:`localization.dead_reckoning_kernel`)."""
     GENERIC = "generic"
-    """C's filter objects step by step: the reference, about a hundred times slower."""
+    """The generic filter classes step by step: the reference, about a hundred times slower."""
 
 
 @dataclass(frozen=True)
@@ -503,7 +503,7 @@ class DeadReckoningSettings:
         return KappaSigmaPoints() if self.filter == Filter.IUKF else ScaledSigmaPoints(alpha=1e-3)
 
     def generic_filter(self):
-        """C's filter object for this setting."""
+        """The generic filter object for this setting."""
         if self.filter == Filter.UKF:
             return UnscentedKalmanFilter(points=self.sigma_points())
         if self.filter == Filter.IUKF:
