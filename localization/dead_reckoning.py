@@ -74,8 +74,8 @@ per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
 
 Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step,
 take 190-380 us a step for the batch of two branches (``ekf`` .. ``iukf``; 16 s for 600 s of
-``ukf`` at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning` therefore runs a compiled step specialised
-to this model (:mod:`localization.dead_reckoning_kernel`, numba), still the same filter: the
+``ukf`` at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning`
+therefore runs a compiled step specialised to this model (:mod:`localization.dead_reckoning_kernel`, numba), still the same filter: the
 unscented prediction with the same sigma points and moments as the generic one (or the EKF
 prediction), and the closed-form update that equals the unscented one for the linear ``h``
 (``tests/localization/test_dead_reckoning.py`` checks it against the generic filter classes: ~1e-13 for
