@@ -72,25 +72,24 @@ two uniform tick fractions, standard deviation ``1 / sqrt(6)`` tick (treated as 
 in fact anti-correlated, so the filter is conservative about it); the IMU white noise has the
 per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
 
-Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step,
-take 190-380 us a step for the batch of two branches (``ekf`` .. ``iukf``; 16 s for 600 s of
-``ukf`` at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning`
-therefore runs a compiled step specialised to this model (:mod:`localization.dead_reckoning_kernel`, numba), still the same filter: the
-unscented prediction with the same sigma points and moments as the generic one (or the EKF
-prediction), and the closed-form update that equals the unscented one for the linear ``h``
-(``tests/localization/test_dead_reckoning.py`` checks it against the generic filter classes: ~1e-13 for
-the EKF and the kappa points; ~1e-8 over 300 steps for the scaled points, whose
-``1 / gamma^2`` amplifies rounding, as between any two implementations). One call runs a
-whole ``run()`` stretch, all samples and all runs, and writes the history in place.
-Measured (``benchmarks/dead_reckoning.py``, 600 s of ``hall``, batch of two): 3.3 us a step
-for ``ukf``/``iukf``, 1.9 us for ``ekf``, 80-115 times the generic filters; in the pipeline
-(600 calls) 0.23 s instead of 4.4 s. The first run on a machine compiles the kernel
-(about 3 s; cached beside the module after that). The heading is kept unwrapped inside the
-loop (the model is periodic in it) and wrapped in the history and the belief; sigma-point
-heading offsets are wrapped as in the generic filter when the points are wide
-(``gamma >= 0.01``, e.g. the IUKF's kappa points), and not for the scaled points
-(``gamma ~ 3e-3``), where that needs ``sigma_theta < pi / gamma`` (1000 rad; checked).
-"""
+Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step, take
+190-380 us a step for the batch of two branches (``ekf`` .. ``iukf``; 16 s for 600 s of ``ukf``
+at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning` therefore
+runs a compiled step specialised to this model (:mod:`localization.dead_reckoning_kernel`,
+numba), still the same filter: the unscented prediction with the same sigma points and moments
+as the generic one (or the EKF prediction), and the closed-form update that equals the
+unscented one for the linear ``h`` (``tests/localization/test_dead_reckoning.py`` checks it
+against the generic filter classes: ~1e-13 for the EKF and the kappa points; ~1e-8 over 300
+steps for the scaled points, whose ``1 / gamma^2`` amplifies rounding, as between any two
+implementations). One call runs a whole ``run()`` stretch, all samples and all runs, and writes
+the history in place. Measured (``benchmarks/dead_reckoning.py``, 600 s of ``hall``, batch of
+two): 3.3 us a step for ``ukf``/``iukf``, 1.9 us for ``ekf``, 80-115 times the generic filters;
+in the pipeline (600 calls) 0.23 s instead of 4.4 s. The first run on a machine compiles the
+kernel (about 3 s; cached beside the module after that). The heading is kept unwrapped inside
+the loop (the model is periodic in it) and wrapped in the history and the belief; sigma-point
+heading offsets are wrapped as in the generic filter when the points are wide (``gamma >=
+0.01``, e.g. the IUKF's kappa points), and not for the scaled points (``gamma ~ 3e-3``), where
+that needs ``sigma_theta < pi / gamma`` (1000 rad; checked)."""
 
 from __future__ import annotations
 
