@@ -12,7 +12,7 @@ scenario's run (``--pipeline-s`` simulated seconds, 0 to skip) with its ``[estim
 settings (SIVIA, ``q_max`` 1, guaranteed, the robot's physical limits), as ``robotsim run``
 steps it (only the interval epochs are timed).
 
-Every case runs both engines of the sonar box test (:data:`intervals.sonar.ENGINES`: the
+Every case runs both engines of the sonar box test (:data:`intervals.sonar.engines.ENGINES`: the
 numpy reference and the compiled kernel) on the same scans, interleaved scan by scan, and
 reports their times side by side with the median per-epoch speed-up; it exits 1 as well if
 their sets differ. The compiled kernel is loaded (compiled, on a fresh checkout) by one
@@ -31,7 +31,9 @@ import time
 
 import numpy as np
 
-from intervals.sonar import ENGINES, SonarBelt, SonarScan, localize
+from intervals.localize import localize
+from intervals.sonar.engines import ENGINES
+from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances

@@ -11,7 +11,7 @@ Two predictions are offered (MODELS.md section 4):
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
 
-Outliers: q-relaxation and GOMNE (:func:`intervals.sonar.gomne`), up to ``q_max``. Each epoch
+Outliers: q-relaxation and GOMNE (:func:`intervals.localize.gomne`), up to ``q_max``. Each epoch
 ends in one of :data:`STATUSES`:
 
 * ``"global"``: a global search gave the set (the first epoch, and the one after an epoch
@@ -43,7 +43,9 @@ from intervals.boxes import (
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import imagesp
-from intervals.sonar import ENGINES, SonarScan, gomne
+from intervals.localize import gomne
+from intervals.sonar.engines import ENGINES
+from intervals.sonar.scan import SonarScan
 
 TRACKERS = ("sivia", "imagesp")
 STATUSES = ("global", "tracking", "inconsistent", "lost")
@@ -60,12 +62,12 @@ class TrackerSettings:
     ``eps_m``; coarser than ``eps_m`` keeps the number of cells small before SIVIA refines);
     ``guaranteed``: keep the ``q_max``-relaxed set, which holds the truth whenever a scan has
     at most ``q_max`` outliers (True), or GOMNE's smaller set at its minimal ``q``, which can
-    miss it (False; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger
+    miss it (False; see :func:`intervals.localize.gomne`). The guaranteed set is much larger
     where few sensors see a wall, and a kidnapping is then detected later. ``engine``: the
-    implementation of the sonar box test, one of :data:`intervals.sonar.ENGINES` (the compiled
+    implementation of the sonar box test, one of :data:`intervals.sonar.engines.ENGINES` (the compiled
     kernel by default; ``"numpy"`` is its reference, same sets). ``ray_test``: add the ray test
-    of :mod:`intervals.rays` to the box test (``None``: only for thin cones, see
-    :data:`intervals.sonar.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
+    of :mod:`intervals.sonar.rays` to the box test (``None``: only for thin cones, see
+    :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
     """
 
     v_max_m_s: float

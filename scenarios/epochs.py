@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from intervals.boxes import area_xy, contains_points
-from intervals.sonar import SonarBelt, SonarScan
+from intervals.sonar.scan import SonarBelt, SonarScene
 from intervals.tracker import STATUSES, EpochResult, IntervalTracker, TrackerSettings
 
 STATUS = STATUSES
@@ -38,12 +38,12 @@ class EpochRunner:
         self, tracker_settings: TrackerSettings, segments, boundary, map_bounds, belt: SonarBelt
     ):
         self._tracker = IntervalTracker(tracker_settings, map_bounds)
-        self._segments, self._boundary, self._belt = segments, boundary, belt
+        self._scene = SonarScene(segments, belt, boundary)  # the map checked once per run
         self._previous = None
 
     def step(self, readings_m: np.ndarray, dt_s: float) -> EpochResult:
         """One epoch on the scan ``readings_m (k,)`` taken ``dt_s`` after the previous one."""
-        scan = SonarScan(self._segments, self._belt, readings_m, self._boundary)
+        scan = self._scene.scan(readings_m)
         result = self._tracker.step(self._previous, scan, dt_s)
         self._previous = result.paving
         return result

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from intervals.errors import IntervalError
-from intervals.sonar import SonarBelt
+from intervals.sonar.scan import SonarBelt
 from intervals.tracker import TrackerSettings
 from localization.dead_reckoning import (
     DeadReckoning,

@@ -5,23 +5,25 @@ bounds (errors often exactly at the bounds), for thin (1e-6 rad) and wide (0.2 r
 random maps, random belts (mounts off the radial direction too) and boxes from 1e-6 m to 2 m
 wide. Brute force: every pose sampled in a rejected box is inconsistent with the rejecting
 sensor. Not vacuous: most boxes shifted away from the truth are rejected, and on thin cones
-it rejects boxes that :mod:`intervals.sonar` keeps.
+it rejects boxes that :mod:`intervals.sonar.cone` keeps.
 """
 
 import numpy as np
 import pytest
 
-from intervals import rays
 from intervals.boxes import contains_points, volume
 from intervals.errors import IntervalError
-from intervals.rays import (
+from intervals.localize import _uses_ray_test, gomne, localize
+from intervals.sonar import rays
+from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.rays import (
     joint_rejection_counts,
     joint_rejections,
     piece_rejections,
     ray_rejections,
     sub_boxes,
 )
-from intervals.sonar import SonarBelt, SonarScan, _uses_ray_test, gomne, localize, sensor_verdicts
+from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -167,7 +169,7 @@ def test_most_boxes_away_from_the_truth_are_rejected_by_a_thin_cone():
 @pytest.mark.parametrize("gamma", [1e-6, np.deg2rad(12.5)])
 def test_rejects_boxes_the_sonar_test_keeps(gamma):
     """Boxes near the truth in the hall: the ray test rejects boxes that
-    :func:`intervals.sonar.sensor_verdicts` keeps; on a thin cone (1e-6 rad) far more than
+    :func:`intervals.sonar.cone.sensor_verdicts` keeps; on a thin cone (1e-6 rad) far more than
     the other way round, on the real belt (12.5 deg) some (its cone-edge free-space rays)."""
     rng = np.random.default_rng(5)
     hall = builtin_map("hall")
@@ -331,7 +333,7 @@ def test_compiled_engine_matches_the_numpy_reference():
 
 
 def test_localize_and_gomne_with_the_ray_test_keep_the_truth_in_smaller_sets():
-    """The hook in :mod:`intervals.sonar`: with ``ray_test`` the sets still hold the truth (also
+    """The hook in :mod:`intervals.sonar.cone`: with ``ray_test`` the sets still hold the truth (also
     with ``q`` outliers under GOMNE) and are never larger, and strictly smaller on thin cones."""
     rng = np.random.default_rng(11)
     smaller = 0

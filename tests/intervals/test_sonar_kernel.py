@@ -1,4 +1,4 @@
-"""The compiled sonar box test (``intervals.sonar_kernel``) against its numpy reference.
+"""The compiled sonar box test (``intervals.sonar.cone_kernel``) against its numpy reference.
 
 Random maps, poses, belts (the default one and random non-radial ones, apertures from 1e-3 to
 1.2 rad), readings with errors at their bounds, outliers, lost echoes (ignored, or free space
@@ -13,27 +13,17 @@ import dataclasses
 import numpy as np
 import pytest
 
-from intervals import sonar_kernel
 from intervals.errors import IntervalError
 from intervals.interval import TRIG_EXACT_LIMIT_RAD
+from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE
-from intervals.sonar import (
-    _ANGLE_MARGIN_RAD,
-    _ARC_SLACK,
-    ECHO,
-    ENGINES,
-    FREE,
-    GUARD_M,
-    IGNORED,
-    SonarBelt,
-    SonarScan,
-    _heading_trig,
-    _sensor_boxes,
-    box_test,
-    gomne,
-    localize,
-    sensor_verdicts,
-)
+from intervals.sonar import cone_kernel as sonar_kernel
+from intervals.sonar.cone import _heading_trig, _sensor_boxes, sensor_verdicts
+from intervals.sonar.engines import ENGINES
+from intervals.sonar.geometry import ANGLE_MARGIN_RAD as _ANGLE_MARGIN_RAD
+from intervals.sonar.geometry import ARC_SLACK as _ARC_SLACK
+from intervals.sonar.geometry import GUARD_M
+from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
 from tests.intervals.test_sonar import PARAMS, _boxes_around, _distances, _random_map, _readings

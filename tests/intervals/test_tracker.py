@@ -6,7 +6,7 @@ import pytest
 
 from intervals.boxes import unwrap_headings
 from intervals.errors import IntervalError
-from intervals.sonar import SonarBelt, SonarScan
+from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances

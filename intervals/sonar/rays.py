@@ -1,6 +1,6 @@
 r"""Ray tests of the sonar cone model on pose boxes: the heading kept as one variable.
 
-Why. :mod:`intervals.sonar` bounds the sensor position ``s(p)`` by a box that ranges
+Why. :mod:`intervals.sonar.cone` bounds the sensor position ``s(p)`` by a box that ranges
 independently of the cone direction, and its free-space test needs a direction that is in
 the cone for every heading of the box. For a thin cone (half-aperture ``gamma`` below the
 heading width of the box) the first is loose and the second never fires. Here every point of
@@ -63,7 +63,7 @@ Enclosures over a box (or a piece of one, below):
   part of the coupling between (1) and (2), which share ``x, y`` and ``B``.
 
 Tests, for sensor ``i`` with the distance interval ``[lo, hi]`` of its reading
-(:func:`intervals.sonar.reading_intervals`, outward rounded), on a piece:
+(:func:`intervals.sonar.scan.reading_intervals`, outward rounded), on a piece:
 
 * **Hit test** (an echo: ``hi`` finite). If ``d_i(p) in [lo, hi]`` for a pose ``p`` of the
   piece, the nearest cone point ``P`` lies on some segment ``j`` at distance ``d_i(p)`` in a
@@ -79,13 +79,13 @@ Tests, for sensor ``i`` with the distance interval ``[lo, hi]`` of its reading
   L]``, ``0 <= lambda`` and ``lambda < lo - GUARD_M``), the meeting point is a map point in
   the cone nearer than ``lo``, so ``d_i(p) < lo``: the piece is rejected by the sensor.
 * An empty reading interval (``lo > hi``: no fault-free reading gives it) rejects every piece,
-  as in :mod:`intervals.sonar`; ignored sensors never reject.
+  as in :mod:`intervals.sonar.cone`; ignored sensors never reject.
 
 A box is rejected by sensor ``i`` (:func:`ray_rejections`) when every piece is; jointly
 (:func:`joint_rejections`) when in every piece more than ``q`` sensors reject the piece (a
 pose of the box lies in some piece, where more than ``q`` readings cannot be explained).
 
-Engines (:data:`ENGINES`): the numpy reference evaluates all of the above on arrays of
+Engines (:data:`intervals.sonar.engines.ENGINES`): the numpy reference evaluates all of the above on arrays of
 (piece, sensor, segment) triples; the compiled kernel (numba) performs the same operations in
 the same order, triple by triple, and stops early: a sensor's piece is decided once one
 segment passes the hit test and one surely meets a free-space ray, and it skips the
@@ -104,8 +104,8 @@ IEEE operation. ``sin``/``cos`` at the ends of ``B`` (numpy's or numba's, whose 
 measured errors are a few ulps) are enclosed by ``+- TRIG_TOL = 2e-15``: at least 9 ulps of
 a value in ``[-1, 1]`` (an ulp there is at most ``2^-52 = 2.2e-16``), which also covers the
 rounding of that addition; the sign decisions demand a margin of ``TRIG_TOL``. Every
-comparison is moreover biased toward keeping the box by :data:`intervals.sonar.GUARD_M` (as
-in :mod:`intervals.sonar`): a miss needs ``lambda`` outside ``[lo - GUARD_M, hi + GUARD_M]``,
+comparison is moreover biased toward keeping the box by :data:`intervals.sonar.geometry.GUARD_M` (as
+in :mod:`intervals.sonar.cone`): a miss needs ``lambda`` outside ``[lo - GUARD_M, hi + GUARD_M]``,
 ``t L`` outside ``[-GUARD_M, L + GUARD_M]`` or a far segment beyond ``hi + GUARD_M + rho``,
 a sure meeting ``lambda < lo - GUARD_M``. A NaN bound (unbounded inputs) fails every strict
 comparison and so keeps the box; unbounded intervals are not cut into pieces.
@@ -119,9 +119,11 @@ import numba
 import numpy as np
 
 from intervals import interval as ia
-from intervals import sonar  # the module, not names: intervals.sonar may import this module
 from intervals.boxes import as_boxes
 from intervals.errors import IntervalError
+from intervals.sonar.engines import ENGINES
+from intervals.sonar.geometry import GUARD_M
+from intervals.sonar.scan import ECHO, FREE, SonarScan
 
 DEFAULT_PIECES = (1, 1, 4)
 """Pieces ``(px, py, pt)`` along x, y and theta into which each box is cut (see the module
@@ -144,10 +146,6 @@ module doc: at least 9 ulps there; it also covers the rounding of ``+- TRIG_TOL`
 
 MAX_B_WIDTH_RAD = 3.0
 """Widest ``B`` interval on which ``sin B`` is claimed to keep one sign (below pi)."""
-
-ENGINES = ("compiled", "numpy")
-"""Implementations of :func:`piece_rejections`: the numba kernel (default) and the numpy
-reference it is tested against (same operations in the same order)."""
 
 BLOCK_ELEMENTS = 1 << 18
 """Largest number of (piece, sensor, segment) triples evaluated in one numpy pass."""
@@ -448,7 +446,7 @@ def _k_piece_rejections(
     ``bbox (m, 4)``: the segments' bounding boxes (:func:`_box_gap`);
     ``slanted (m,)`` bool; ``base (D, k, m, 2)``: epsilon - alpha - delta for the hit ray
     (``D = 0``) and the free-space rays; ``kappa (D, k, 2, 2)``: rho cos kappa, rho sin kappa;
-    ``kind (k,)`` int8 of :mod:`intervals.sonar`."""
+    ``kind (k,)`` int8 of :mod:`intervals.sonar.scan`."""
     n_parts, n_rays, k, m = parts.shape[0], base.shape[0], base.shape[1], base.shape[2]
     trig = np.empty(8)
     res = np.empty(4)
@@ -545,9 +543,9 @@ def _k_piece_rejections(
 
 
 def _checked(boxes, scan, pieces) -> tuple[np.ndarray, tuple[int, int, int]]:
-    if not isinstance(scan, sonar.SonarScan):
+    if not isinstance(scan, SonarScan):
         raise IntervalError(
-            f"ray test: expected an intervals.sonar.SonarScan, got {type(scan).__name__}"
+            f"ray test: expected an intervals.sonar.scan.SonarScan, got {type(scan).__name__}"
         )
     if not (len(pieces) == 3 and all(isinstance(c, (int, np.integer)) and c >= 1 for c in pieces)):
         raise IntervalError(f"ray test: pieces must be three integers >= 1, got {pieces!r}")
@@ -631,9 +629,9 @@ def _numpy_block(parts, scan, const, reject) -> None:
     """One block of :func:`_numpy_pieces` (``reject`` is a view, updated in place)."""
     seg, rays, rho_hi = const["seg"], const["rays"], const["rho_hi"]
     slanted = np.flatnonzero(const["slanted"])
-    echo, free = scan.kind == sonar.ECHO, scan.kind == sonar.FREE
+    echo, free = scan.kind == ECHO, scan.kind == FREE
     lo, hi = scan.ranges[None, :, None, 0], scan.ranges[None, :, None, 1]
-    guard = sonar.GUARD_M  # metres, in favour of keeping the box
+    guard = GUARD_M  # metres, in favour of keeping the box
     length_lo, length_hi = seg["L"][..., 0], seg["L"][..., 1]
     part = parts[:, :, None, None]  # (B, 3, 1, 1, 2)
     x, y, theta = part[:, 0], part[:, 1], part[:, 2]  # (B, 1, 1, 2)
@@ -698,23 +696,23 @@ def _compiled_pieces(parts, scan, const, reject) -> None:
         np.ascontiguousarray(scan.ranges[:, 1]),
         np.ascontiguousarray(scan.kind),
         np.ascontiguousarray(const["rho_hi"][0, :, 0]),
-        float(sonar.GUARD_M),
+        float(GUARD_M),
         out,
     )
     reject |= out
 
 
 def piece_rejections(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N, P, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of piece
     ``j`` of box ``n`` (the sub-boxes of :func:`sub_boxes`, ``P = px * py * pt``).
 
     ``boxes``: pose boxes ``(N, 3, 2)`` (x_m, y_m, theta_rad); ``scan``: readings, belt and map
-    (:class:`intervals.sonar.SonarScan`; the scan :meth:`~intervals.sonar.SonarScan.restricted_to`
+    (:class:`intervals.sonar.scan.SonarScan`; the scan :meth:`~intervals.sonar.scan.SonarScan.restricted_to`
     the boxes gives the same soundness, faster: it keeps every segment within reach, all the hit
     test needs, and the free-space test is sound with any subset); ``pieces``: ``(px, py, pt)``;
-    ``engine``: one of :data:`ENGINES`. Sound for the cone model of :mod:`intervals.sonar` at
+    ``engine``: one of :data:`ENGINES`. Sound for the cone model of :mod:`intervals.sonar.cone` at
     every half-aperture, tight for a ray (see the module doc). The numpy engine is vectorised
     over pieces, sensors and segments in blocks of about :data:`BLOCK_ELEMENTS` triples; the
     compiled one loops over them in one call.
@@ -723,7 +721,7 @@ def piece_rejections(
     if engine not in ENGINES:
         raise IntervalError(f"ray test: engine must be one of {ENGINES}, got {engine!r}")
     n, p, k, m = boxes.shape[0], int(np.prod(pieces)), scan.belt.count, scan.segments.shape[0]
-    echo = scan.kind == sonar.ECHO
+    echo = scan.kind == ECHO
     reject = np.broadcast_to(echo & (scan.ranges[:, 0] > scan.ranges[:, 1]), (n * p, k)).copy()
     if m == 0 or n == 0:
         return (reject | echo).reshape(n, p, k)  # an echo needs a segment to come from
@@ -734,7 +732,7 @@ def piece_rejections(
 
 
 def ray_rejections(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of box ``n``
     (it rejects every piece; see :func:`piece_rejections`)."""
@@ -742,12 +740,12 @@ def ray_rejections(
 
 
 def joint_rejection_counts(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N,)`` int: over the pieces of box ``n``, the smallest number of sensors rejecting the
     piece. A box with a count above ``q`` holds no pose that leaves at most ``q`` readings
     unexplained (each pose lies in some piece). ``other``: ``(N, k)`` rejections of another
-    sound test on the whole boxes (e.g. :func:`intervals.sonar.sensor_verdicts`), counted in
+    sound test on the whole boxes (e.g. :func:`intervals.sonar.cone.sensor_verdicts`), counted in
     every piece; the count is then at least that test's own count.
     """
     rejected = piece_rejections(boxes, scan, pieces, engine)
@@ -758,7 +756,7 @@ def joint_rejection_counts(
 
 def joint_rejections(
     boxes,
-    scan: sonar.SonarScan,
+    scan: SonarScan,
     q: int = 0,
     pieces=DEFAULT_PIECES,
     other=None,

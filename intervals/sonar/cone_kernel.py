@@ -1,23 +1,23 @@
 r"""The compiled sonar box test (numba): every box, sensor and segment of one test call at once.
 
-:func:`intervals.sonar.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
+:func:`intervals.sonar.cone.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
 (one SIVIA level). For each pose box the kernel builds the sensor-position boxes and the wedge
 half-planes of every sensor, keeps the segments within reach of their hull, and runs the hit
 test, the free-space test and (optionally) the inner acceptance of the module doc of
-:mod:`intervals.sonar` on every (segment, used sensor) pair, with scalar loops instead of
+:mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
 sensors leave. It is the same computation as the numpy implementation there (the
 reference it is tested against, ``tests/intervals/test_sonar_kernel.py``): the same formulas,
 evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
 into fused multiply-adds without ``fastmath``), with the same ``GUARD_M`` biases, sensor-box
-margin, ``_arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
+margin, ``arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
 outward-rounded reading intervals (computed once per scan by numpy) and the same ``cos`` and
 ``sin`` of the heading bounds (computed by numpy per call, so that no libm-versus-numpy ulp
-difference can arise; it would be covered anyway: the error budget of :mod:`intervals.sonar`
+difference can arise; it would be covered anyway: the error budget of :mod:`intervals.sonar.geometry`
 allows a few ulps, ``1e-15``, per direction component against a sensor-box widening of ``1e-9 (1
 + |m_i|)`` m and ``GUARD_M = 1e-5`` m on every comparison). ``hypot`` is the C library's in
 both, ``abs``, ``min`` and ``max`` are exact. So every verdict equals the reference's bit for bit
-and every guarantee of :mod:`intervals.sonar` holds unchanged; the tests check equality over
+and every guarantee of :mod:`intervals.sonar.cone` holds unchanged; the tests check equality over
 random cases.
 
 Shapes and units: ``N`` boxes ``(N, 3, 2)`` (x m, y m, theta rad; lower, upper), ``m`` segments
@@ -35,9 +35,9 @@ import numpy as np
 
 IGNORED, ECHO, FREE = 0, 1, 2
 """Kinds of sensor constraint: no information, an echo ``[lo, hi]``, free space to ``d_max``
-(re-exported by :mod:`intervals.sonar`)."""
+(re-exported by :mod:`intervals.sonar.scan`)."""
 
-# columns of the belt table (k, 8) built by intervals.sonar.SonarBelt.kernel_table
+# columns of the belt table (k, 8) built by intervals.sonar.scan.SonarBelt.kernel_table
 COS_BETA, SIN_BETA, R_LO, R_HI, COS_RIGHT, SIN_RIGHT, COS_LEFT, SIN_LEFT = range(8)
 
 # columns of the per-sensor scratch rows of one box: sensor box, union and intersection
@@ -67,7 +67,7 @@ def _min(a: float, b: float) -> float:
 @numba.njit(cache=True)
 def _nearest_distance(px, py, ax, ay, ex, ey):
     """``(qx, qy, dist)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p``
-    (as ``intervals.sonar._nearest_on_segment``)."""
+    (as ``intervals.sonar.geometry.nearest_on_segment``)."""
     ee = ex * ex + ey * ey
     t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
     if t < 0.0:
@@ -81,7 +81,7 @@ def _nearest_distance(px, py, ax, ay, ex, ey):
 @numba.njit(cache=True)
 def _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m):
     """Lower bound of the distance between the segment ``a + t e`` and the box ``(c, h)`` (as
-    ``intervals.sonar._segment_box_gap``, which states why it is a bound)."""
+    ``intervals.sonar.geometry.segment_box_gap``, which states why it is a bound)."""
     qx, qy, dist = _nearest_distance(cx, cy, ax, ay, ex, ey)
     if dist >= near_switch_m:
         return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy)
@@ -98,7 +98,7 @@ def _point_box_farthest(px, py, cx, cy, hx, hy):
 def _clip(ax, ay, ex, ey, planes, first):
     """Parameter range ``(t_lo, t_hi)`` of ``a + t e``, t in [0, 1], in the two half-planes
     ``nx qx + ny qy >= c`` stored as ``planes[first:first + 6] = (nx, ny, c, nx, ny, c)``;
-    empty where ``t_lo > t_hi`` (as ``intervals.sonar._clip_segment``)."""
+    empty where ``t_lo > t_hi`` (as ``intervals.sonar.geometry.clip_segment``)."""
     t_lo, t_hi = 0.0, 1.0
     for h in range(first, first + 6, 3):
         nx, ny, c = planes[h], planes[h + 1], planes[h + 2]
@@ -116,7 +116,7 @@ def _clip(ax, ay, ex, ey, planes, first):
 @numba.njit(cache=True)
 def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
     """Whether the arc from ``u_a`` counter-clockwise to ``u_b`` holds the axis direction
-    ``e`` (as ``intervals.sonar._arc_reaches``, slack towards "reached")."""
+    ``e`` (as ``intervals.sonar.geometry.arc_reaches``, slack towards "reached")."""
     det_a = ux_a * ey - uy_a * ex
     det_b = ex * uy_b - ey * ux_b
     if half_turn:
@@ -127,7 +127,7 @@ def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
 @numba.njit(cache=True)
 def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
     """One wedge-edge half-plane ``(nx, ny, c)`` into ``out[at:at + 3]`` (as one turn of
-    ``intervals.sonar._wedge_constraints``)."""
+    ``intervals.sonar.geometry.wedge_constraints``)."""
     nx, ny = -flip * uy, flip * ux
     spread = abs(nx) * hx + abs(ny) * hy
     out[at] = nx
@@ -151,7 +151,7 @@ def _sensor_rows(
 ):
     """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
-    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar._sensor_boxes``); returns ``sure``
+    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.cone._sensor_boxes``); returns ``sure``
     (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
     theta_lo, theta_hi = box[2, 0], box[2, 1]
     width = theta_hi - theta_lo
@@ -222,14 +222,15 @@ def sensor_verdicts_into(
     reject,
     certain,
 ):
-    """Per box and sensor verdicts of :func:`intervals.sonar.sensor_verdicts`, in place.
+    """Per box and sensor verdicts of :func:`intervals.sonar.cone.sensor_verdicts`, in place.
 
     ``boxes (N, 3, 2)`` and ``cos_theta, sin_theta (N, 2)`` of their heading bounds (numpy's
     ``cos`` and ``sin``, those of the reference); ``segments (m, 2, 2)``; ``ranges (k, 2)``
-    distance intervals m and ``kind (k,)`` int8 of the readings (:func:`intervals.sonar.reading_intervals`); ``reach_m``
-    (:attr:`intervals.sonar.SonarScan.reach_m`); ``belt (k, 8)``
-    (:attr:`intervals.sonar.SonarBelt.kernel_table`); the aperture, the sensor-box margin m and
-    the tolerances of :mod:`intervals.sonar`; ``inner``: compute ``certain``.
+    distance intervals m and ``kind (k,)`` int8 of the readings
+    (:func:`intervals.sonar.scan.reading_intervals`); ``reach_m``
+    (:attr:`intervals.sonar.scan.SonarScan.reach_m`); ``belt (k, 8)``
+    (:attr:`intervals.sonar.scan.SonarBelt.kernel_table`); the aperture, the sensor-box margin
+    m and the tolerances of :mod:`intervals.sonar.geometry`; ``inner``: compute ``certain``.
     Writes ``reject (N, k)`` and ``certain (N, k)`` (bool, every element).
     """
     k = belt.shape[0]
@@ -329,7 +330,7 @@ def sensor_verdicts_into(
 
 @numba.njit(cache=True)
 def room_verdicts_into(boxes, boundary, guard_m, near_switch_m, outside, inside):
-    """The in-room test of :mod:`intervals.sonar` (as ``intervals.sonar._room_verdict``), in
+    """The in-room test of :mod:`intervals.sonar.room` (as ``intervals.sonar.room.room_verdicts``), in
     place: ``outside (N,)`` / ``inside (N,)`` bool, the (x, y) rectangle of box ``n`` lies
     entirely outside / inside the polygon ``boundary (p, 2)`` m: no edge comes within
     ``guard_m`` of it, and the ray cast from its centre towards +x crosses the boundary an even

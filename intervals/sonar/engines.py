@@ -1,0 +1,11 @@
+"""The implementations of the sonar box tests, one choice for all of them.
+
+``"compiled"``: the numba kernels (:mod:`intervals.sonar.cone_kernel`, the kernel of
+:mod:`intervals.sonar.rays`), the default; ``"numpy"``: the vectorised references they are
+tested against (same verdicts).
+"""
+
+ENGINES = ("compiled", "numpy")
+"""Engine names accepted by the cone test (:func:`intervals.sonar.cone.sensor_verdicts`), the
+in-room test, the ray test (:func:`intervals.sonar.rays.piece_rejections`) and
+:mod:`intervals.localize`."""
