@@ -180,10 +180,18 @@ def sensor_verdicts(
     n, k = boxes.shape[0], scan.belt.count
     reject, certain = np.empty((n, k), dtype=bool), np.empty((n, k), dtype=bool)
     belt, boxes = scan.belt, np.ascontiguousarray(boxes)  # one compiled signature: C order
+    assert scan.scene is not None
+    grid = scan.scene.grid
     cone_kernel.sensor_verdicts_into(
         boxes,
         *_heading_trig(boxes),
-        scan.segments,
+        scan.scene.segments,
+        scan.allowed,
+        grid.origin,
+        grid.cell_m,
+        np.array(grid.shape, dtype=np.int64),
+        grid.starts,
+        grid.members,
         scan.ranges,
         scan.kind,
         scan.reach_m,

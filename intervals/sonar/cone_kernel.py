@@ -2,7 +2,8 @@ r"""The compiled sonar box test (numba): every box, sensor and segment of one te
 
 :func:`intervals.sonar.cone.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
 (one SIVIA level). For each pose box the kernel builds the sensor-position boxes and the wedge
-half-planes of every sensor, keeps the segments within reach of their hull, and runs the hit
+half-planes of every sensor, keeps the segments within reach of their hull (looked up in the
+scene's :mod:`intervals.sonar.segment_grid`, not the whole map), and runs the hit
 test, the free-space test and (optionally) the inner acceptance of the module doc of
 :mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
@@ -202,11 +203,67 @@ def _sensor_rows(
 
 
 @numba.njit(cache=True)
+def _segment_verdicts(
+    ax, ay, ex, ey, rows, ranges, kind, sure, guard_m, near_switch_m, hit, fires, close, sure_hit
+):
+    """The hit and free-space tests (and the inner acceptance's parts) of one pose box against
+    the segment ``a + t e``, every used sensor: sets ``hit``, ``fires``, ``close`` and
+    ``sure_hit`` ``(k,)`` where this segment makes them true (never resets them), so the
+    verdicts do not depend on the order in which the segments come."""
+    k = rows.shape[0]
+    for i in range(k):
+        if kind[i] == IGNORED:
+            continue
+        # the part [t0, t1] of the segment in S + W(Phi)
+        t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
+        if not t0 <= t1:
+            continue
+        cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
+        lo, hi = ranges[i, 0], ranges[i, 1]
+        # hit test: distance bounds between that part and the sensor box
+        p0x, p0y = ax + t0 * ex, ay + t0 * ey
+        dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
+        dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
+        dist_ub = (
+            _max(
+                _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+                _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+            )
+            + guard_m
+        )
+        if dist_lb <= hi and dist_ub >= lo:
+            hit[i] = True
+        if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
+            close[i] = True  # some pose may see this segment closer than lo
+        # free-space test: segment points in the cone for every pose of the box
+        if sure:
+            u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
+            if u0 <= u1:
+                far_bound = (
+                    _nearest_distance(
+                        cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
+                    )[2]
+                    + math.hypot(hx, hy)
+                    + guard_m
+                )
+                if far_bound < lo:
+                    fires[i] = True
+                if far_bound <= hi:
+                    sure_hit[i] = True
+
+
+@numba.njit(cache=True)
 def sensor_verdicts_into(
     boxes,
     cos_theta,
     sin_theta,
     segments,
+    allowed,
+    grid_origin,
+    grid_cell_m,
+    grid_shape,
+    grid_starts,
+    grid_members,
     ranges,
     kind,
     reach_m,
@@ -225,8 +282,11 @@ def sensor_verdicts_into(
     """Per box and sensor verdicts of :func:`intervals.sonar.cone.sensor_verdicts`, in place.
 
     ``boxes (N, 3, 2)`` and ``cos_theta, sin_theta (N, 2)`` of their heading bounds (numpy's
-    ``cos`` and ``sin``, those of the reference); ``segments (m, 2, 2)``; ``ranges (k, 2)``
-    distance intervals m and ``kind (k,)`` int8 of the readings
+    ``cos`` and ``sin``, those of the reference); ``segments (M, 2, 2)`` (the scene's) of which
+    only those with ``allowed (M,)`` take part, and their grid
+    (:class:`intervals.sonar.segment_grid.SegmentGrid`: ``grid_origin (2,)``, ``grid_cell_m``,
+    ``grid_shape (2,)`` int64, ``grid_starts``, ``grid_members``); ``ranges (k, 2)`` distance
+    intervals m and ``kind (k,)`` int8 of the readings
     (:func:`intervals.sonar.scan.reading_intervals`); ``reach_m``
     (:attr:`intervals.sonar.scan.SonarScan.reach_m`); ``belt (k, 8)``
     (:attr:`intervals.sonar.scan.SonarBelt.kernel_table`); the aperture, the sensor-box margin
@@ -240,6 +300,8 @@ def sensor_verdicts_into(
     close = np.empty(k, dtype=np.bool_)  # some segment may be closer than lo
     sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
     visible = reach_m + guard_m
+    nx, ny = grid_shape[0], grid_shape[1]
+    seen = np.zeros(segments.shape[0], dtype=np.int64)  # box number + 1 of the last visit
     for n in range(boxes.shape[0]):
         sure = _sensor_rows(
             boxes[n],
@@ -268,55 +330,42 @@ def sensor_verdicts_into(
         fires[:] = False
         close[:] = False
         sure_hit[:] = False
-        for j in range(segments.shape[0]):
-            ax, ay = segments[j, 0, 0], segments[j, 0, 1]
-            ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-            gap = _segment_box_gap(
-                ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
-            )
-            if not gap <= visible:
-                continue
-            for i in range(k):
-                if kind[i] == IGNORED:
-                    continue
-                # the part [t0, t1] of the segment in S + W(Phi)
-                t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
-                if not t0 <= t1:
-                    continue
-                cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
-                lo, hi = ranges[i, 0], ranges[i, 1]
-                # hit test: distance bounds between that part and the sensor box
-                p0x, p0y = ax + t0 * ex, ay + t0 * ey
-                dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-                dist_lb = (
-                    _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
-                )
-                dist_ub = (
-                    _max(
-                        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+        # the segments registered near the hull (intervals.sonar.segment_grid: every segment
+        # the gap test below keeps is among them), each once (stamped with the box number)
+        radius = visible + math.hypot(hull_hx, hull_hy)
+        ix0 = max(math.floor((hull_cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
+        ix1 = min(math.floor((hull_cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
+        iy0 = max(math.floor((hull_cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
+        iy1 = min(math.floor((hull_cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+        for ix in range(ix0, ix1 + 1):
+            for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
+                for member in range(grid_starts[cell], grid_starts[cell + 1]):
+                    j = grid_members[member]
+                    if seen[j] == n + 1 or not allowed[j]:
+                        continue
+                    seen[j] = n + 1
+                    ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+                    ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
+                    gap = _segment_box_gap(
+                        ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
                     )
-                    + guard_m
-                )
-                if dist_lb <= hi and dist_ub >= lo:
-                    hit[i] = True
-                if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
-                    close[i] = True  # some pose may see this segment closer than lo
-                # free-space test: segment points in the cone for every pose of the box
-                if sure:
-                    u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
-                    if u0 <= u1:
-                        far_bound = (
-                            _nearest_distance(
-                                cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-                            )[2]
-                            + math.hypot(hx, hy)
-                            + guard_m
+                    if gap <= visible:
+                        _segment_verdicts(
+                            ax,
+                            ay,
+                            ex,
+                            ey,
+                            rows,
+                            ranges,
+                            kind,
+                            sure,
+                            guard_m,
+                            near_switch_m,
+                            hit,
+                            fires,
+                            close,
+                            sure_hit,
                         )
-                        if far_bound < lo:
-                            fires[i] = True
-                        if far_bound <= hi:
-                            sure_hit[i] = True
         for i in range(k):
             echo, free = kind[i] == ECHO, kind[i] == FREE
             impossible = echo and ranges[i, 0] > ranges[i, 1]

@@ -34,6 +34,7 @@ from intervals.sonar.geometry import (
     segment_box_gap,
     up,
 )
+from intervals.sonar.segment_grid import SegmentGrid
 
 __all__ = ["ECHO", "FREE", "IGNORED", "SonarBelt", "SonarScan", "SonarScene", "reading_intervals"]
 
@@ -224,6 +225,17 @@ class SonarScene:
         object.__setattr__(self, "segments", seg)
         object.__setattr__(self, "boundary", boundary)
 
+    @cached_property
+    def grid(self) -> SegmentGrid:
+        """The segments in a uniform grid (:mod:`intervals.sonar.segment_grid`), built on first
+        use: the box tests look up the segments near a box there."""
+        return SegmentGrid.build(self.segments)
+
+    @cached_property
+    def mount_radius_m(self) -> float:
+        """Largest distance of a sensor from the robot's centre, m."""
+        return float(np.max(np.hypot(*self.belt.mount_xy.T)))
+
     def scan(self, readings_m) -> SonarScan:
         """The scan of one epoch's readings ``(k,)`` m (``inf`` = no echo) in this scene."""
         return SonarScan(self.segments, self.belt, readings_m, self.boundary, scene=self)
@@ -237,7 +249,8 @@ class SonarScan:
     those within reach of some boxes after :meth:`restricted_to`); ``belt``; ``readings_m
     (k,)``; ``boundary (p, 2)`` outer wall polygon whose interior is the free space, or None;
     ``scene``: the :class:`SonarScene` the scan belongs to (None: built here from the three
-    map fields, which are then validated). Derived fields: ``ranges (k, 2)`` and ``kind (k,)``
+    map fields, which are then validated); ``segment_ids (m,)``: the indices of ``segments``
+    among the scene's (None: all of them, in order). Derived fields: ``ranges (k, 2)`` and ``kind (k,)``
     from :func:`reading_intervals`; ``reach_m``: the largest distance at which a segment can
     matter to some sensor (0 if no sensor is used).
     """
@@ -247,17 +260,18 @@ class SonarScan:
     readings_m: np.ndarray
     boundary: np.ndarray | None = None
     scene: SonarScene | None = field(default=None, repr=False)
+    segment_ids: np.ndarray | None = field(default=None, repr=False)
     ranges: np.ndarray = field(init=False)
     kind: np.ndarray = field(init=False)
     reach_m: float = field(init=False)
 
     def __post_init__(self) -> None:
-        scene = self.scene
-        if scene is None:
+        if self.scene is None:
             scene = SonarScene(self.segments, self.belt, self.boundary)
             object.__setattr__(self, "scene", scene)
             object.__setattr__(self, "segments", scene.segments)
             object.__setattr__(self, "boundary", scene.boundary)
+            object.__setattr__(self, "segment_ids", None)
         ranges, kind = reading_intervals(self.readings_m, self.belt)
         object.__setattr__(self, "readings_m", np.asarray(self.readings_m, dtype=np.float64))
         object.__setattr__(self, "ranges", ranges)
@@ -266,14 +280,35 @@ class SonarScan:
         reach = np.where(kind == ECHO, ranges[:, 1], self.belt.d_max_m)
         object.__setattr__(self, "reach_m", float(np.max(reach[used])) if used.any() else 0.0)
 
+    @cached_property
+    def allowed(self) -> np.ndarray:
+        """``(M,)`` bool over the scene's segments: the segment is one of this scan's."""
+        assert self.scene is not None
+        mask = np.zeros(self.scene.segments.shape[0], dtype=bool)
+        mask[slice(None) if self.segment_ids is None else self.segment_ids] = True
+        return mask
+
     def restricted_to(self, boxes: np.ndarray) -> SonarScan:
-        """The same scan with only the segments that can matter to poses in ``boxes``."""
+        """The same scan with only the segments that can matter to poses in ``boxes``: those
+        whose distance bound to the (x, y) hull of the boxes is at most the reach plus the
+        mount radius (plus ``GUARD_M``), looked up in the scene's grid (which gathers every
+        such segment, :mod:`intervals.sonar.segment_grid`) and kept in the scene's order."""
+        assert self.scene is not None
         hull_xy = hull(as_boxes(boxes))[:2]
-        radius = float(np.max(np.hypot(*self.belt.mount_xy.T)))
-        a, e = self.segments[:, 0], self.segments[:, 1] - self.segments[:, 0]
         centre, half = (hull_xy[:, 0] + hull_xy[:, 1]) / 2, (hull_xy[:, 1] - hull_xy[:, 0]) / 2
+        reach = self.reach_m + self.scene.mount_radius_m + GUARD_M
+        ids = self.scene.grid.near(centre, reach + float(np.hypot(*half)))
+        if self.segment_ids is not None:
+            ids = ids[self.allowed[ids]]
+        seg = self.scene.segments[ids]
+        a, e = seg[:, 0], seg[:, 1] - seg[:, 0]
         gap = segment_box_gap(a[:, 0], a[:, 1], e[:, 0], e[:, 1], *centre, *half)
-        near = gap <= self.reach_m + radius + GUARD_M
+        ids = ids[gap <= reach]
         return SonarScan(
-            self.segments[near], self.belt, self.readings_m, self.boundary, scene=self.scene
+            self.scene.segments[ids],
+            self.belt,
+            self.readings_m,
+            self.boundary,
+            scene=self.scene,
+            segment_ids=ids,
         )
