@@ -204,15 +204,32 @@ def _sensor_rows(
 
 @numba.njit(cache=True)
 def _segment_verdicts(
-    ax, ay, ex, ey, rows, ranges, kind, sure, guard_m, near_switch_m, hit, fires, close, sure_hit
+    ax,
+    ay,
+    ex,
+    ey,
+    rows,
+    ranges,
+    kind,
+    sure,
+    inner,
+    guard_m,
+    near_switch_m,
+    hit,
+    fires,
+    close,
+    sure_hit,
+    done,
 ):
     """The hit and free-space tests (and the inner acceptance's parts) of one pose box against
-    the segment ``a + t e``, every used sensor: sets ``hit``, ``fires``, ``close`` and
+    the segment ``a + t e``, every sensor not ``done``: sets ``hit``, ``fires``, ``close`` and
     ``sure_hit`` ``(k,)`` where this segment makes them true (never resets them), so the
-    verdicts do not depend on the order in which the segments come."""
+    verdicts do not depend on the order in which the segments come. Marks ``done`` the sensors
+    whose verdict no further segment can change (:func:`_decided`); returns how many."""
     k = rows.shape[0]
+    decided = 0
     for i in range(k):
-        if kind[i] == IGNORED:
+        if done[i]:
             continue
         # the part [t0, t1] of the segment in S + W(Phi)
         t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
@@ -250,6 +267,19 @@ def _segment_verdicts(
                     fires[i] = True
                 if far_bound <= hi:
                     sure_hit[i] = True
+        if _decided(hit[i], fires[i], sure, inner):
+            done[i] = True
+            decided += 1
+    return decided
+
+
+@numba.njit(cache=True)
+def _decided(hit, fires, sure, inner):
+    """Whether a sensor's verdicts are final for the box whatever segments come next: the free
+    space test fired (rejected), or some segment passes the hit test when neither the free
+    space test (``sure`` false: it cannot fire) nor the inner acceptance (``inner`` false) is
+    evaluated (``hit``, ``fires`` and the final formulas only ever turn towards these)."""
+    return fires or (hit and not sure and not inner)
 
 
 @numba.njit(cache=True)
@@ -299,6 +329,7 @@ def sensor_verdicts_into(
     fires = np.empty(k, dtype=np.bool_)  # the free-space test fires
     close = np.empty(k, dtype=np.bool_)  # some segment may be closer than lo
     sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
+    done = np.empty(k, dtype=np.bool_)  # the sensor's verdicts are final for this box
     visible = reach_m + guard_m
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # box number + 1 of the last visit
@@ -330,6 +361,12 @@ def sensor_verdicts_into(
         fires[:] = False
         close[:] = False
         sure_hit[:] = False
+        # sensors decided before any segment: ignored ones, and free-space readings when the
+        # free-space test cannot fire (their verdict is "not rejected", certain unused)
+        remaining = 0
+        for i in range(k):
+            done[i] = kind[i] == IGNORED or (kind[i] == FREE and not sure and not inner)
+            remaining += 0 if done[i] else 1
         # the segments registered near the hull (intervals.sonar.segment_grid: every segment
         # the gap test below keeps is among them), each once (stamped with the box number)
         radius = visible + math.hypot(hull_hx, hull_hy)
@@ -338,8 +375,14 @@ def sensor_verdicts_into(
         iy0 = max(math.floor((hull_cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
         iy1 = min(math.floor((hull_cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
         for ix in range(ix0, ix1 + 1):
+            if remaining == 0:
+                break  # every verdict is final: the other segments cannot change it
             for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
+                if remaining == 0:
+                    break
                 for member in range(grid_starts[cell], grid_starts[cell + 1]):
+                    if remaining == 0:
+                        break
                     j = grid_members[member]
                     if seen[j] == n + 1 or not allowed[j]:
                         continue
@@ -350,7 +393,7 @@ def sensor_verdicts_into(
                         ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
                     )
                     if gap <= visible:
-                        _segment_verdicts(
+                        remaining -= _segment_verdicts(
                             ax,
                             ay,
                             ex,
@@ -359,12 +402,14 @@ def sensor_verdicts_into(
                             ranges,
                             kind,
                             sure,
+                            inner,
                             guard_m,
                             near_switch_m,
                             hit,
                             fires,
                             close,
                             sure_hit,
+                            done,
                         )
         for i in range(k):
             echo, free = kind[i] == ECHO, kind[i] == FREE
