@@ -335,10 +335,13 @@ class Subpaving:
 
     ``inner (Ni, d, 2)``: boxes proved inside ``X``. ``boundary (Nb, d, 2)``: undecided boxes of
     width at most ``eps``. The outer approximation ``inner ∪ boundary`` contains ``X``.
+    ``coarse``: a budget cut the paving short (:func:`intervals.sivia.sivia`'s ``max_tested``,
+    :func:`coarsen`): some boundary boxes are wider than ``eps``, or merged; still a cover.
     """
 
     inner: np.ndarray
     boundary: np.ndarray
+    coarse: bool = False
 
     @property
     def outer(self) -> np.ndarray:

@@ -67,7 +67,12 @@ class TrackerSettings:
     implementation of the sonar box test, one of :data:`intervals.sonar.engines.ENGINES` (the compiled
     kernel by default; ``"numpy"`` is its reference, same sets). ``ray_test``: add the ray test
     of :mod:`intervals.sonar.rays` to the box test (``None``: only for thin cones, see
-    :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
+    :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`). ``max_boxes``: the budget of
+    an epoch (:func:`intervals.localize.localize`): its set holds at most this many boxes, its
+    SIVIA tests at most ``TESTS_PER_BOX`` times as many, and the IMAGESP prediction at most
+    this many cells (else the inflated hull); an epoch cut short keeps a coarser cover and is
+    reported ``coarse``. The default keeps a test call within a few tens of MB and 600
+    epochs of sets at the cap within about 350 MB (57 bytes a stored box), under 1 GiB a run.
     """
 
     v_max_m_s: float
@@ -80,6 +85,7 @@ class TrackerSettings:
     guaranteed: bool = True
     engine: str = "compiled"
     ray_test: bool | None = None
+    max_boxes: int = 10_000
 
     def __post_init__(self) -> None:
         checks = (
@@ -107,6 +113,10 @@ class TrackerSettings:
                 self.ray_test is None or isinstance(self.ray_test, bool),
                 "ray_test must be True, False or None",
             ),
+            (
+                isinstance(self.max_boxes, (int, np.integer)) and self.max_boxes >= 8,
+                "max_boxes must be an integer >= 8",
+            ),
         )
         for ok, message in checks:
             if not ok:
@@ -121,13 +131,15 @@ class EpochResult:
     wrapped to ``[-pi, pi]``); ``q``: GOMNE's minimal number of outliers explaining the scan
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
     ``guaranteed``); ``status``: one of :data:`STATUSES`; ``elapsed_s``: wall time of the
-    epoch (timing, not a result).
+    epoch (timing, not a result); ``coarse``: the budget (``max_boxes``) cut the epoch's
+    paving short or merged its boxes: the set is a coarser sound cover.
     """
 
     paving: Subpaving | None
     q: int | None
     status: str
     elapsed_s: float = 0.0
+    coarse: bool = False
 
     @property
     def consistent(self) -> bool:
@@ -203,9 +215,17 @@ class IntervalTracker:
             return wrap_headings(self.limits(hull(boxes)[None], dt_s))
         motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
-        cells = imagesp(
-            lambda b: motion(b, dt_s), boxes, s.eps_m, scale, pitch=s.imagesp_pitch_m / scale
-        )
+        try:
+            cells = imagesp(
+                lambda b: motion(b, dt_s),
+                boxes,
+                s.eps_m,
+                scale,
+                pitch=s.imagesp_pitch_m / scale,
+                max_cells=s.max_boxes,
+            )
+        except IntervalError:  # more cells than the budget: the image of the hull, one box
+            cells = motion(hull(boxes)[None], dt_s)
         return wrap_headings(cells)
 
     def _search(self, scan: SonarScan, initial: np.ndarray):
@@ -219,6 +239,7 @@ class IntervalTracker:
             guaranteed=s.guaranteed,
             engine=s.engine,
             ray_test=s.ray_test,
+            max_boxes=s.max_boxes,
         )
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
@@ -233,5 +254,8 @@ class IntervalTracker:
             status = "tracking" if found.consistent else "inconsistent"
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
-        paving = Subpaving(wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary))
-        return EpochResult(paving, found.q, status, time.perf_counter() - start)
+        coarse = found.paving.coarse
+        paving = Subpaving(
+            wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary), coarse
+        )
+        return EpochResult(paving, found.q, status, time.perf_counter() - start, coarse)

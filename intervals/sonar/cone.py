@@ -77,6 +77,9 @@ from intervals.sonar.geometry import (
 )
 from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 
+NUMPY_BLOCK_ELEMENTS = 1 << 18
+"""Largest number of (box, segment, sensor) triples the numpy reference evaluates at once."""
+
 
 @dataclass(frozen=True)
 class _SensorBoxes:
@@ -173,8 +176,14 @@ def sensor_verdicts(
     boxes = as_boxes(boxes)
     if boxes.shape[1] != 3:
         raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
-    if engine == "numpy":
-        return _numpy_sensor_verdicts(boxes, scan, inner)
+    if engine == "numpy":  # in blocks of boxes: its arrays grow with boxes x segments x sensors
+        block = max(1, NUMPY_BLOCK_ELEMENTS // max(1, scan.segments.shape[0] * scan.belt.count))
+        parts = [
+            _numpy_sensor_verdicts(boxes[start : start + block], scan, inner)
+            for start in range(0, max(boxes.shape[0], 1), block)
+        ]
+        reject = np.concatenate([part[0] for part in parts])
+        return reject, np.concatenate([part[1] for part in parts])
     if engine != "compiled":
         raise IntervalError(f"sonar test: engine must be one of {ENGINES}, got {engine!r}")
     n, k = boxes.shape[0], scan.belt.count

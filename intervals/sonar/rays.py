@@ -148,7 +148,8 @@ MAX_B_WIDTH_RAD = 3.0
 """Widest ``B`` interval on which ``sin B`` is claimed to keep one sign (below pi)."""
 
 BLOCK_ELEMENTS = 1 << 18
-"""Largest number of (piece, sensor, segment) triples evaluated in one numpy pass."""
+"""Largest number of (piece, sensor, segment) triples evaluated in one numpy pass, and of
+(piece, segment) pairs whose terms the compiled engine is given at once."""
 
 
 def _down(x):
@@ -726,8 +727,14 @@ def piece_rejections(
     if m == 0 or n == 0:
         return (reject | echo).reshape(n, p, k)  # an echo needs a segment to come from
     parts = sub_boxes(boxes, pieces).reshape(n * p, 3, 2)
-    run = _compiled_pieces if engine == "compiled" else _numpy_pieces
-    run(parts, scan, _ray_constants(scan), reject)
+    if engine == "numpy":
+        _numpy_pieces(parts, scan, _ray_constants(scan), reject)
+    else:  # in blocks of pieces: the per-(piece, segment) terms are arrays
+        const, block = _ray_constants(scan), max(1, BLOCK_ELEMENTS // m)
+        for start in range(0, parts.shape[0], block):
+            _compiled_pieces(
+                parts[start : start + block], scan, const, reject[start : start + block]
+            )
     return reject.reshape(n, p, k)
 
 

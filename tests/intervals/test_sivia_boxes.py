@@ -96,9 +96,57 @@ def test_sivia_accepts_initial_subpaving_and_checks_preconditions():
     with pytest.raises(IntervalError, match="bounded"):
         sivia(test, np.array([[0.0, np.inf], [0.0, 1.0]]), eps=0.1)
     with pytest.raises(IntervalError, match="max_boxes"):
-        sivia(lambda b: np.full(b.shape[0], UNDECIDED, np.int8), halves, eps=1e-3, max_boxes=100)
+        sivia(test, halves, eps=0.1, max_boxes=0)
+    with pytest.raises(IntervalError, match="max_tested"):
+        sivia(test, halves, eps=0.1, max_tested=-1)
     with pytest.raises(IntervalError, match="test returned"):
         sivia(lambda b: np.full(b.shape[0], 7, np.int8), halves, eps=0.1)
+
+
+def test_sivia_in_chunks_and_under_a_test_budget():
+    """A frontier larger than ``max_boxes`` is tested in chunks (no call sees more, same
+    set); with ``max_tested`` the paving stops, is marked coarse, and still covers the set
+    (every point of the fine outer set, which holds the set, is in the coarse one); an
+    everywhere-undecided test at a tiny eps (10^8 boxes at the end) stops in bounded work."""
+    rng = np.random.default_rng(2)
+    landmarks = np.array([[0.0, 0.0], [4.0, 0.0]])
+    ranges = np.array([[2.0, 2.2], [2.8, 3.0]])  # two lenses, mirror images about y = 0
+    seen = []
+
+    def test(boxes):
+        seen.append(boxes.shape[0])
+        return range_only_test(landmarks, ranges)(boxes)
+
+    box = np.array([[-5.0, 5.0], [-5.0, 5.0]])
+    whole = sivia(test, box, eps=0.01)
+    assert not whole.coarse and max(seen) > 200
+    seen.clear()
+    chunked = sivia(test, box, eps=0.01, max_boxes=60)
+    assert max(seen) <= 60 and not chunked.coarse
+    order = np.lexsort(whole.boundary.reshape(-1, 4).T)
+    np.testing.assert_array_equal(
+        np.sort(chunked.boundary.reshape(-1, 4), axis=0),
+        np.sort(whole.boundary.reshape(-1, 4), axis=0),
+    )
+    assert order.size == chunked.boundary.shape[0]
+    points = np.concatenate(
+        [rng.uniform(b[:, 0], b[:, 1], size=(20, 2)) for b in whole.outer]
+    )  # points of the fine outer set
+    for budget in (0, 10, 200, 1000):  # the whole paving tests 1169 boxes
+        seen.clear()
+        coarse = sivia(test, box, eps=0.01, max_boxes=60, max_tested=budget)
+        assert sum(seen) <= budget and coarse.coarse
+        assert coarse.contains(points).all()
+    seen.clear()
+    undecided = sivia(
+        lambda b: (seen.append(b.shape[0]), np.full(b.shape[0], UNDECIDED, np.int8))[1],
+        box,
+        eps=1e-4,
+        max_boxes=1000,
+        max_tested=20_000,
+    )
+    assert undecided.coarse and sum(seen) <= 20_000 and undecided.boundary.shape[0] < 30_000
+    assert undecided.contains(rng.uniform(-5, 5, size=(1000, 2))).all()
 
 
 def test_bisect_scaled_axis_and_union():
