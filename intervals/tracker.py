@@ -42,8 +42,8 @@ from intervals.boxes import (
     wrap_headings,
 )
 from intervals.errors import IntervalError
-from intervals.imagesp import imagesp
-from intervals.localize import gomne
+from intervals.imagesp import coarsen, imagesp
+from intervals.localize import TESTS_PER_BOX, gomne
 from intervals.sonar.engines import ENGINES
 from intervals.sonar.scan import SonarScan
 
@@ -69,9 +69,9 @@ class TrackerSettings:
     of :mod:`intervals.sonar.rays` to the box test (``None``: only for thin cones, see
     :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`). ``max_boxes``: the budget of
     an epoch (:func:`intervals.localize.localize`): its set holds at most this many boxes, its
-    SIVIA tests at most ``TESTS_PER_BOX`` times as many, and the IMAGESP prediction at most
-    this many cells (else the inflated hull); an epoch cut short keeps a coarser cover and is
-    reported ``coarse``. The default keeps a test call within a few tens of MB and 600
+    SIVIA tests at most ``TESTS_PER_BOX`` times as many, and the IMAGESP prediction makes at
+    most as many cells (else the image of the hull); an epoch cut short keeps a coarser cover
+    and is reported ``coarse``. The default keeps a test call within a few tens of MB and 600
     epochs of sets at the cap within about 350 MB (57 bytes a stored box), under 1 GiB a run.
     """
 
@@ -222,7 +222,7 @@ class IntervalTracker:
                 s.eps_m,
                 scale,
                 pitch=s.imagesp_pitch_m / scale,
-                max_cells=s.max_boxes,
+                max_cells=TESTS_PER_BOX * s.max_boxes,
             )
         except IntervalError:  # more cells than the budget: the image of the hull, one box
             cells = motion(hull(boxes)[None], dt_s)
@@ -254,8 +254,11 @@ class IntervalTracker:
             status = "tracking" if found.consistent else "inconsistent"
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
-        coarse = found.paving.coarse
-        paving = Subpaving(
-            wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary), coarse
-        )
+        s, coarse = self.settings, found.paving.coarse
+        inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
+        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # boxes split at the +-pi cut
+            scale = pose_scale(s.heading_scale_m_per_rad)
+            merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
+            inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True
+        paving = Subpaving(inner, boundary, coarse)
         return EpochResult(paving, found.q, status, time.perf_counter() - start, coarse)

@@ -59,7 +59,8 @@ class EpochLog:
     the hull of the outer set (NaN without a set; heading within one turn of the first box);
     ``components (E,)``; ``area_m2 (E,)`` (x, y) area of the union of the outer boxes (NaN
     without a set); ``contains_truth (E,)`` bool: some outer box holds the true pose (False
-    without a set); ``elapsed_s (E,)`` wall time per epoch (timing).
+    without a set); ``elapsed_s (E,)`` wall time per epoch (timing); ``coarse (E,)`` bool: the
+    tracker's budget (``max_boxes``) made the epoch's set a coarser cover.
     """
 
     t_s: np.ndarray
@@ -74,6 +75,7 @@ class EpochLog:
     area_m2: np.ndarray
     contains_truth: np.ndarray
     elapsed_s: np.ndarray
+    coarse: np.ndarray
 
     @classmethod
     def collect(cls, t_s: np.ndarray, results: list[EpochResult], truth: np.ndarray) -> EpochLog:
@@ -100,6 +102,7 @@ class EpochLog:
             area_m2=np.array([area_xy(b) if len(b) else np.nan for b in outer]),
             contains_truth=contains.astype(bool).reshape(count),
             elapsed_s=np.array([r.elapsed_s for r in results]),
+            coarse=np.array([r.coarse for r in results], dtype=bool).reshape(count),
         )
 
     def epoch_boxes(self, e: int) -> np.ndarray:
