@@ -11,6 +11,7 @@ from intervals.localize import TESTS_PER_BOX, gomne
 from intervals.sonar.scan import ECHO, FREE, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
+from tests.intervals.test_rays import _case
 from tests.intervals.test_sonar import PARAMS, _distances, _random_map, _readings
 from tests.intervals.test_tracker import _circuit
 
@@ -139,3 +140,17 @@ def test_coarsen_covers_with_fewer_disjoint_boxes():
             assert (holding.sum(axis=1) == 1).all()
     few = rng.uniform(0, 1, size=(5, 3, 2))
     assert coarsen(few, 5) is few
+
+
+def test_budget_with_the_ray_test_keeps_the_truth():
+    """Thin cones (the ray test joins the cone test) under budgets of 16 and 100 boxes: the
+    coarse sets, retested with both tests, hold the truth and stay under the budget."""
+    rng = np.random.default_rng(13)
+    for trial in range(16):
+        scan, _, truth = _case(rng, 0.02, echoes_never_lost=trial % 2 == 0)
+        half = np.array([0.8, 0.8, 0.4])
+        prior = np.stack([truth - half, truth + half], axis=-1)
+        max_boxes = (16, 100)[trial % 2]
+        result = gomne(scan, prior, 0.02, 1, ray_test=True, max_boxes=max_boxes)
+        assert result.consistent and result.paving.contains(truth[None])[0]
+        assert result.paving.outer.shape[0] <= max_boxes
