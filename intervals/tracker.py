@@ -70,8 +70,8 @@ class TrackerSettings:
     :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`). ``max_boxes``: the budget of
     an epoch (:func:`intervals.localize.localize`): its set holds at most this many boxes, its
     SIVIA tests at most ``TESTS_PER_BOX`` times as many, and the IMAGESP prediction makes at
-    most as many cells (else the image of the hull); an epoch cut short keeps a coarser cover
-    and is reported ``coarse``. The default keeps a test call within a few tens of MB and 600
+    most ``TESTS_PER_BOX * max_boxes`` cells (else the image of the hull); an epoch cut short
+    keeps a coarser cover and is reported ``coarse``. The default keeps a test call within a few tens of MB and 600
     epochs of sets at the cap within about 350 MB (57 bytes a stored box), under 1 GiB a run.
     """
 
