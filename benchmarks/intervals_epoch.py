@@ -12,7 +12,7 @@ scenario's run (``--pipeline-s`` simulated seconds, 0 to skip) with its ``[estim
 settings (SIVIA, ``q_max`` 1, guaranteed, the robot's physical limits), as ``robotsim run``
 steps it (only the interval epochs are timed).
 
-Every case runs both engines of the sonar box test (:class:`intervals.engine.Engine`: the
+Every case runs both engines of the sonar box test (:class:`intervals.sonar.engines.Engine`: the
 numpy reference and the compiled kernel) on the same scans, interleaved scan by scan, and
 reports their times side by side with the median per-epoch speed-up; it exits 1 as well if
 their sets differ. The compiled kernel is loaded (compiled, on a fresh checkout) by one
@@ -32,8 +32,9 @@ from functools import partial
 
 import numpy as np
 
-from intervals.engine import Engine
-from intervals.sonar import SonarBelt, SonarScan, localize
+from intervals.localize import localize
+from intervals.sonar.engines import Engine
+from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances

@@ -14,7 +14,7 @@ function of the four distances.
 (b) 3-D pose ``(x, y, theta)`` in the ``hall`` map from the 16 range readings of the default
 sonar belt taken along rays (the sonar model with a zero half-aperture), ``d_max`` 100 m so
 that every ray meets a wall, errors bounded by ``0.02 m + 1 %``. Neither side takes a zero
-half-aperture (``robotsim.sensors.sonar.cone_distances`` and ``intervals.sonar.SonarBelt``
+half-aperture (``robotsim.sensors.sonar.cone_distances`` and ``intervals.sonar.scan.SonarBelt``
 both require ``half_aperture_rad > 0``), so the readings are simulated and inverted by ours
 with a cone of half-aperture :data:`RAY_HALF_APERTURE_RAD` (1e-6 rad: it departs from the ray by
 at most 1e-5 m within 10 m). Codac expresses the ray model as an analytic function: for
@@ -28,11 +28,11 @@ and ``>`` tests round differently and keep boxes of different sizes); global: th
 heading ``[-pi, pi]``, ``eps`` 0.05. Same problem on both sides: no in-room test for ours (codac has none),
 widths unscaled (heading scale 1 m/rad, as codac's ``max_diam``), all 16 sensors.
 
-Ours in (b) twice, both ``intervals.sonar.localize``: with the sonar box test alone
+Ours in (b) twice, both ``intervals.localize.localize``: with the sonar box test alone
 (``ray_test=False``), and "ours + ray test" (``ray_test=True``, what ``localize`` does by
 default for cones this thin): the sonar test, then on the boxes it would keep the ray test of
-:mod:`intervals.rays` (the heading kept as one variable, boxes cut into
-``intervals.rays.DEFAULT_PIECES`` heading pieces, a box rejected when every piece is rejected
+:mod:`intervals.sonar.rays` (the heading kept as one variable, boxes cut into
+``intervals.sonar.rays.DEFAULT_PIECES`` heading pieces, a box rejected when every piece is rejected
 by some sensor). The last table measures that combination on
 the real belt (half-aperture 12.5 deg, ``d_max`` 3 m) and on narrower cones in tracking
 epochs, to show where it pays (``--belt-runs``).
@@ -63,10 +63,12 @@ import numpy as np
 from _common import best_seconds, machine_line, markdown_table, timed, write_section
 
 from intervals import interval as ia
-from intervals import rays
 from intervals.boxes import contains_points, volume
+from intervals.localize import localize
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
-from intervals.sonar import SonarBelt, SonarScan, localize, sensor_verdicts
+from intervals.sonar import rays
+from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
@@ -86,7 +88,7 @@ BELT_EPS = 0.05
 BELT_HALF_APERTURES_RAD = (float(np.deg2rad(12.5)), 0.1, 0.05, 0.03, 0.003)
 """The default belt's half-aperture first, then narrower cones (see :func:`run_belt_case`)."""
 SPLITS_PER_LEVEL = 3
-"""Bisections per SIVIA level on our side (as ``intervals.sonar.localize``): fewer, larger
+"""Bisections per SIVIA level on our side (as ``intervals.localize.localize``): fewer, larger
 numpy passes; the boxes kept are the same size."""
 
 
@@ -513,7 +515,7 @@ HEADER = [
     "boxes ours / codac sivia",
     "target",
     "truth in every set",
-    "ours + ray test (intervals.rays) ms",
+    "ours + ray test (intervals.sonar.rays) ms",
     "its time ratio",
     "its volume ratio",
     "its boxes",
@@ -534,18 +536,18 @@ Findings (causes measured with the cross-check above and with timings of the par
 - (a) Our SIVIA is about 3 times faster than codac's ``sivia`` at the same outer volume. Codac
   evaluates one box at a time in C++ (natural and centred forms, so a Jacobian per box); ours
   evaluates each level's boxes in one numpy pass, with 3 bisections per level
-  (``splits_per_level=3``, as ``intervals.sonar.localize``). With one bisection per level ours
+  (``splits_per_level=3``, as ``intervals.localize.localize``). With one bisection per level ours
   takes about 5 ms here (1.7x only): the fixed cost of the test's ~25 numpy calls per level is
   most of the time, so the level count, not the box count, sets the speed.
 - (b) Our sonar test alone is about a thousand (tracking) to ten thousand (global) times faster
   (codac evaluates a 16 x 12-term expression with its centred form per box, in minutes for the
   global case), but its outer set is 1.4 to 3.5 times codac's ``sivia`` set: MISSED. At equal
   box size codac's test rejects about half of its boxes, mostly because a wall is certainly on
-  the ray nearer than the reading. Cause, in ``intervals/sonar.py``: its tests are built for
+  the ray nearer than the reading. Cause, in ``intervals/sonar/cone.py``: its tests are built for
   a wide cone. The free-space test needs a direction in the cone for every heading of the box
   (heading width below ``2 gamma``), never the case for ``gamma = 1e-6`` rad, and the hit test
   lets the sensor position range over its box independently of the direction.
-- With the ray test of ``intervals/rays.py`` (the heading as one variable in the ray-segment
+- With the ray test of ``intervals/sonar/rays.py`` (the heading as one variable in the ray-segment
   meeting, boxes cut into 4 heading pieces and rejected when every piece is rejected by some
   sensor of either test, applied to the boxes no wider than ``eps`` that the sonar test keeps;
   numba kernel) the target is met: tracking volume ratio 0.61 at about 300x, global 1.00 (the
@@ -560,7 +562,7 @@ Findings (causes measured with the cross-check above and with timings of the par
 - Real belt (last table): the ray test also pays at 12.5 deg (median volume 0.90 of the sonar
   test's, smaller in 7 of 8 epochs) and more on narrower cones (0.74 at 0.1 rad, 0.37 to 0.67
   below), for about 5 ms more per epoch (7 ms against the compiled sonar test's 2 ms; the
-  numpy engine of the ray test: about 13 ms more). Hence ``intervals.sonar.localize`` and
+  numpy engine of the ray test: about 13 ms more). Hence ``intervals.localize.localize`` and
   ``gomne`` apply it by default only to cones of half-aperture up to 0.1 rad
   (``ray_test=None``); on the default belt it is an opt-in (``ray_test=True``), which would
   cost the pipeline about 3 s per 600 s.

@@ -1,5 +1,6 @@
 """intervals: outward-rounded interval arithmetic on arrays, boxes, subpavings, SIVIA, IMAGESP,
-and the sonar-cone inclusion tests.
+the sonar model on pose boxes (:mod:`intervals.sonar`), localisation from a scan
+(:mod:`intervals.localize`) and the tracker (:mod:`intervals.tracker`).
 
 Imports none of the other testbed packages: maps are segment arrays, readings are arrays.
 """

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components as _csgraph_components
+from scipy.spatial import cKDTree
 
 from intervals.errors import IntervalError
 
@@ -182,32 +183,150 @@ def area_xy(boxes: np.ndarray) -> float:
     return float(np.sum(cell_area[covered]))
 
 
+COMPONENT_BRUTE_FORCE_BOXES = 64
+"""Box sets up to this size are compared all pairs with all pairs by
+:func:`touching_pairs` (a tree costs more than it saves)."""
+
+_CANDIDATE_MARGIN = 1e-3
+"""Relative slack of the candidate search of :func:`touching_pairs`, far above its float
+error (see there)."""
+
+
+def _touch_on_axis(lo_a, hi_a, lo_b, hi_b, periodic: bool, period: float) -> np.ndarray:
+    """Closed intervals ``[lo_a, hi_a]`` and ``[lo_b, hi_b]`` meet (``periodic``: also with the
+    first shifted by ``-period`` or ``+period``)."""
+    touch = (lo_a <= hi_b) & (lo_b <= hi_a)
+    if periodic:
+        for shift in (-period, period):
+            touch |= (lo_a + shift <= hi_b) & (lo_b <= hi_a + shift)
+    return touch
+
+
+def _touching(boxes, i, j, periodic_axis, period) -> np.ndarray:
+    """``(P,)`` bool: boxes ``i[p]`` and ``j[p]`` touch on every axis (the exact test)."""
+    touch = np.ones(i.shape, dtype=bool)
+    for axis in range(boxes.shape[1]):
+        touch &= _touch_on_axis(
+            boxes[i, axis, 0],
+            boxes[i, axis, 1],
+            boxes[j, axis, 0],
+            boxes[j, axis, 1],
+            axis == periodic_axis,
+            period,
+        )
+    return touch
+
+
+def touching_pairs(
+    boxes: np.ndarray, periodic_axis: int | None = None, period: float = 2.0 * np.pi
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of touching boxes of ``(N, d, 2)``: ``(i (P,), j (P,))`` int64 with ``i < j``
+    (closed intervals meeting on every axis, the ``periodic_axis`` also shifted by
+    ``-+period``; each pair once, in no particular order).
+
+    Candidates come from a k-d tree (``scipy.spatial.cKDTree``) and are then decided by the
+    exact test. Two boxes with centres ``c`` and half-widths ``h`` touch only if ``|c_i - c_j|
+    <= h_i + h_j`` on every axis. The "small" boxes, no wider than twice the median half-width
+    on any axis, have ``h <= H`` (their largest half-widths, per axis); scaled by ``1 / (2 H)``
+    per axis, two touching small boxes are within Chebyshev distance 1, which
+    ``query_pairs`` finds (the periodic axis as a torus, ``boxsize``). A wider box ``b`` can only
+    touch small boxes within ``max_a (h_b + H) / (2 H)`` of it (``query_ball_point``); the wider
+    boxes among themselves are paired by the same method, recursively, or by a sweep along
+    the first non-periodic axis when they are more than half of the boxes. Float errors: the
+    computed centres and half-widths are off by a few ulps of the largest coordinate ``M``,
+    and ``H`` is taken at least ``1e-9 (1 + M)``, so the scaled distances of touching boxes
+    exceed their bound by far less than the search radius' slack :data:`_CANDIDATE_MARGIN`:
+    no touching pair is missed. For pavings (boxes of similar sizes, each touching a few
+    neighbours) the time is ``O(N log N)`` and the memory ``O(N)``.
+    """
+    n = boxes.shape[0]
+    if n <= COMPONENT_BRUTE_FORCE_BOXES:
+        i, j = np.triu_indices(n, 1)
+        keep = _touching(boxes, i, j, periodic_axis, period)
+        return i[keep].astype(np.int64), j[keep].astype(np.int64)
+    centre = (boxes[..., 0] + boxes[..., 1]) / 2.0
+    half = (boxes[..., 1] - boxes[..., 0]) / 2.0
+    small = np.all(half <= 2.0 * np.median(half, axis=0), axis=1)
+    wide = np.flatnonzero(~small)
+    if 2 * wide.size > n:
+        return _sweep_pairs(boxes, periodic_axis, period)
+    narrow = np.flatnonzero(small)
+    extent = 1.0 + float(np.max(np.abs(boxes)))
+    reach = np.maximum(half[narrow].max(axis=0), 1e-9 * extent)  # H, per axis
+    scale = 1.0 / (2.0 * reach)
+    points = centre * scale
+    size = np.zeros(boxes.shape[1])  # 0: not periodic
+    if periodic_axis is not None:
+        torus = period * scale[periodic_axis]
+        wrapped = np.mod(points[:, periodic_axis], torus)
+        points[:, periodic_axis] = np.where(wrapped < torus, wrapped, 0.0)
+        size[periodic_axis] = torus
+    tree = cKDTree(points[narrow], boxsize=size)
+    radius = 1.0 + _CANDIDATE_MARGIN
+    found = tree.query_pairs(radius, p=np.inf, output_type="ndarray")
+    firsts, seconds = [narrow[found[:, 0]]], [narrow[found[:, 1]]]
+    if wide.size:
+        ball = np.max((half[wide] + reach) * scale, axis=1) * radius
+        near = tree.query_ball_point(points[wide], ball, p=np.inf, return_sorted=False)
+        counts = np.array([len(found) for found in near], dtype=np.int64)
+        firsts.append(np.repeat(wide, counts))
+        seconds.append(narrow[np.concatenate([np.asarray(f, dtype=np.int64) for f in near])])
+        among_i, among_j = touching_pairs(boxes[wide], periodic_axis, period)
+        firsts.append(wide[among_i])
+        seconds.append(wide[among_j])
+    i, j = np.concatenate(firsts), np.concatenate(seconds)
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    keep = _touching(boxes, i, j, periodic_axis, period)
+    return i[keep].astype(np.int64), j[keep].astype(np.int64)
+
+
+def _sweep_pairs(boxes, periodic_axis, period) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`touching_pairs` by sweep and prune along the first non-periodic axis (boxes
+    sorted by lower bound: each meets, on that axis, the boxes after it whose lower bound is at
+    most its upper bound; with one periodic axis alone, also their copies shifted by
+    ``-+period``). ``O(N log N + C)`` for ``C`` candidate pairs on that axis."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    axis = next((a for a in range(d) if a != periodic_axis), 0)
+    lo, hi = boxes[:, axis, 0], boxes[:, axis, 1]
+    owner = np.arange(n)
+    if axis == periodic_axis:
+        owner = np.tile(owner, 3)
+        shift = np.repeat([0.0, -period, period], n)
+        lo, hi = np.tile(lo, 3) + shift, np.tile(hi, 3) + shift
+    order = np.argsort(lo, kind="stable")
+    ends = np.searchsorted(lo[order], hi[order], side="right")
+    counts = ends - np.arange(order.size) - 1
+    first = np.repeat(np.arange(order.size), counts)
+    second = first + 1 + np.arange(first.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    i, j = owner[order[first]], owner[order[second]]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    keep = (i != j) & _touching(boxes, i, j, periodic_axis, period)
+    return i[keep], j[keep]
+
+
 def connected_components(
     boxes: np.ndarray, periodic_axis: int | None = None, period: float = 2.0 * np.pi
 ) -> tuple[int, np.ndarray]:
     """Connected components of the union of closed boxes ``(N, d, 2)``.
 
-    Two boxes are connected when they overlap or touch on every axis. ``periodic_axis`` (the
-    heading, axis 2 of pose boxes) is compared modulo ``period``, so boxes at ``theta = -pi``
-    and ``theta = pi`` join. Returns ``(count, labels (N,))`` (labels 0..count-1).
-    The overlap test is one vectorised ``(N, N, d)`` comparison; the graph search is
-    ``scipy.sparse.csgraph.connected_components``.
+    Two boxes are connected when they overlap or touch on every axis (closed intervals: a
+    shared corner connects). ``periodic_axis`` (the heading, axis 2 of pose boxes) is compared
+    modulo ``period`` as well (intervals also shifted by ``-+period``), so boxes at
+    ``theta = -pi`` and ``theta = pi`` join. Returns ``(count, labels (N,))``, labels
+    ``0..count-1`` numbered in the order of each component's first box. The touching pairs
+    come from :func:`touching_pairs` (``O(N log N)`` for pavings, never an ``N x N`` array),
+    the components from ``scipy.sparse.csgraph.connected_components``.
     """
     n = boxes.shape[0]
     if n == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    lo, hi = boxes[:, None, :, 0], boxes[:, None, :, 1]
-    lo_t, hi_t = boxes[None, :, :, 0], boxes[None, :, :, 1]
-    touch = (lo <= hi_t) & (lo_t <= hi)
-    if periodic_axis is not None:
-        a = periodic_axis
-        for shift in (-period, period):
-            shifted_lo, shifted_hi = lo[..., a] + shift, hi[..., a] + shift
-            touch[..., a] |= (shifted_lo <= hi_t[..., a]) & (lo_t[..., a] <= shifted_hi)
-    rows, cols = np.nonzero(np.all(touch, axis=-1))
-    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n, n))
+    i, j = touching_pairs(boxes, periodic_axis, period)
+    graph = coo_matrix((np.ones(i.size, dtype=np.int8), (i, j)), shape=(n, n))
     count, labels = _csgraph_components(graph, directed=False)
-    return int(count), labels
+    _, first_box, inverse = np.unique(labels, return_index=True, return_inverse=True)
+    rank = np.empty(first_box.size, dtype=np.int64)
+    rank[np.argsort(first_box, kind="stable")] = np.arange(first_box.size)
+    return int(count), rank[inverse]
 
 
 @dataclass(frozen=True)
@@ -216,10 +335,13 @@ class Subpaving:
 
     ``inner (Ni, d, 2)``: boxes proved inside ``X``. ``boundary (Nb, d, 2)``: undecided boxes of
     width at most ``eps``. The outer approximation ``inner ∪ boundary`` contains ``X``.
+    ``coarse``: a budget cut the paving short (:func:`intervals.sivia.sivia`'s ``max_tested``,
+    :func:`coarsen`): some boundary boxes are wider than ``eps``, or merged; still a cover.
     """
 
     inner: np.ndarray
     boundary: np.ndarray
+    coarse: bool = False
 
     @property
     def outer(self) -> np.ndarray:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from intervals.boxes import as_boxes, bisect, max_width
+from intervals.boxes import as_boxes, bisect, hull, max_width, widths
 from intervals.errors import IntervalError
 
 InclusionFunction = Callable[[np.ndarray], np.ndarray]
@@ -109,13 +109,22 @@ def imagesp(
     anchor (default 0). ``pitch (e,)``: grid pitch when coarser cells are wanted (e.g. to be
     contracted by SIVIA afterwards; default ``eps / scale``).
     Raises :class:`IntervalError` for ``eps <= 0``, a NaN or unbounded
-    input box, or an inclusion function that returns a bad shape or NaN.
+    input box, an inclusion function that returns a bad shape or NaN, or more than
+    ``max_cells`` input pieces or output cells (checked before they are made).
     """
     if not np.isfinite(eps) or eps <= 0:
         raise IntervalError(f"IMAGESP: eps must be a positive finite width, got {eps!r}")
     boxes = as_boxes(boxes, "IMAGESP boxes")
     if not np.all(np.isfinite(boxes)):
         raise IntervalError("IMAGESP: input boxes must be bounded")
+    scale_d = np.ones(boxes.shape[1]) if scale is None else np.asarray(scale, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        halvings = np.ceil(np.log2(np.maximum(widths(boxes, scale_d) / eps, 1.0)))
+    if np.sum(np.exp2(halvings.sum(axis=-1))) > max_cells:  # the pieces refine would make
+        raise IntervalError(
+            f"IMAGESP: cutting the input to eps makes more than max_cells={max_cells} boxes; "
+            "raise eps or shrink the input"
+        )
     small = refine(boxes, eps, scale)
     images = np.asarray(f(small), dtype=np.float64)
     if images.ndim != 3 or images.shape[0] != small.shape[0] or images.shape[-1] != 2:
@@ -129,3 +138,27 @@ def imagesp(
     if pitch_e.shape != (e,) or np.any(~(pitch_e > 0)) or not np.all(np.isfinite(pitch_e)):
         raise IntervalError(f"IMAGESP: the grid pitch must be {e} positive numbers, got {pitch_e}")
     return grid_cells(images, pitch_e, origin_e, max_cells)
+
+
+def coarsen(boxes: np.ndarray, max_count: int, scale: np.ndarray | None = None) -> np.ndarray:
+    """At most ``max_count`` boxes ``(M, d, 2)`` whose union holds the union of ``boxes (N, d,
+    2)``: the boxes themselves if few enough, else the cells of a regular grid that meet them
+    (:func:`grid_cells`: outward rounded, no two cells overlap), the pitch starting at the
+    largest scaled width and doubled until few enough cells remain; the hull, one box, if even
+    a grid as wide as the set has too many (``max_count < 2^d``). ``scale (d,)`` as in
+    :func:`imagesp` (the pitch is ``p / scale`` per axis). Each step costs ``O(N log N)`` and
+    holds at most ``3^d N`` cells (at a pitch no smaller than its width a box meets two cells
+    per axis, one more where the outward rounding extends its range)."""
+    if boxes.shape[0] <= max_count:
+        return boxes
+    d = boxes.shape[1]
+    scale_d = np.ones(d) if scale is None else np.asarray(scale, dtype=np.float64)
+    origin = boxes[..., 0].min(axis=0)
+    extent = float(np.max(widths(hull(boxes)[None], scale_d)))
+    pitch = float(np.max(widths(boxes, scale_d)))
+    while pitch <= 2.0 * extent and pitch > 0.0:
+        cells = grid_cells(boxes, pitch / scale_d, origin, max_cells=(3**d) * boxes.shape[0])
+        if cells.shape[0] <= max_count:
+            return cells
+        pitch *= 2.0
+    return hull(boxes)[None]

@@ -31,8 +31,8 @@ OUTSIDE, INSIDE, UNDECIDED = Verdict.OUTSIDE, Verdict.INSIDE, Verdict.UNDECIDED
 BoxTest = Callable[[np.ndarray], np.ndarray]
 """``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values."""
 
-DEFAULT_MAX_BOXES = 2_000_000
-"""Frontier size at which SIVIA stops with an error instead of exhausting memory."""
+DEFAULT_MAX_BOXES = 200_000
+"""Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
 
 
 def _verdicts(test: BoxTest, boxes: np.ndarray) -> np.ndarray:
@@ -72,6 +72,7 @@ def sivia(
     max_boxes: int = DEFAULT_MAX_BOXES,
     splits_per_level: int = 1,
     min_level_boxes: int = 1,
+    max_tested: int | None = None,
 ) -> Subpaving:
     """Pave ``initial`` (one box ``(d, 2)`` or a subpaving ``(N, d, 2)``) with ``test``.
 
@@ -84,6 +85,15 @@ def sivia(
     is bisected ``floor(log2(min_level_boxes / n))`` times instead (if more), so that no test call
     is spent on a handful of boxes (a call has a fixed cost; the boxes it would have rejected
     are rejected as children on the next call instead: same soundness, fewer calls).
+    ``max_boxes``: a frontier of more boxes is cut into equal chunks of at most this many, each
+    tested and refined before the next (depth first: the memory held is a few frontiers of
+    ``max_boxes``, whatever the set; as sound as one call per level, and the same boxes unless
+    a chunk leaves fewer than ``min_level_boxes`` to bisect).
+    ``max_tested``: the most boxes the test may see in all (None: no limit). When the next
+    chunk would exceed it, SIVIA stops and keeps every box not yet decided as a boundary box
+    (possibly wider than ``eps``; each lies in a box the test left undecided, so the outer
+    approximation still holds ``X``), and the subpaving is marked ``coarse``: a sound, coarser
+    cover in bounded time, never an error.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -107,27 +117,40 @@ def sivia(
         scale = np.asarray(scale, dtype=np.float64)
         if scale.shape != (d,) or np.any(~(scale > 0)) or not np.all(np.isfinite(scale)):
             raise IntervalError(f"SIVIA: scale must be {d} positive finite numbers, got {scale}")
+    if not (isinstance(max_boxes, (int, np.integer)) and max_boxes >= 1):
+        raise IntervalError(f"SIVIA: max_boxes must be an integer >= 1, got {max_boxes!r}")
+    if max_tested is not None and not (
+        isinstance(max_tested, (int, np.integer)) and max_tested >= 0
+    ):
+        raise IntervalError(f"SIVIA: max_tested must be an integer >= 0, got {max_tested!r}")
     inner, boundary = [], []
     first = _extra_splits(boxes, min_level_boxes)
     if first:
         small = max_width(boxes, scale) <= eps
         boxes = np.concatenate([boxes[small], _split(boxes[~small], eps, scale, first)])
-    while boxes.shape[0]:
-        if boxes.shape[0] > max_boxes:
-            raise IntervalError(
-                f"SIVIA: {boxes.shape[0]} undecided boxes exceed max_boxes={max_boxes}; "
-                "raise eps or shrink the initial box"
-            )
+    pending, tested, coarse = [boxes], 0, False  # frontiers still to test, the last first
+    while pending:
+        boxes = pending.pop()
+        if boxes.shape[0] > max_boxes:  # equal chunks, the first on top
+            pending.extend(np.array_split(boxes, -(-boxes.shape[0] // max_boxes))[::-1])
+            continue
+        if max_tested is not None and tested + boxes.shape[0] > max_tested:
+            boundary.extend([boxes, *pending])  # undecided, kept whole: a coarser cover
+            coarse = True
+            break
+        tested += boxes.shape[0]
         v = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
         undecided = boxes[v == UNDECIDED]
         small = max_width(undecided, scale) <= eps
         boundary.append(undecided[small])
         wide = undecided[~small]
-        splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-        boxes = _split(wide, eps, scale, splits)
+        if wide.shape[0]:
+            splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
+            pending.append(_split(wide, eps, scale, splits))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,
         boundary=np.concatenate(boundary, axis=0) if boundary else empty,
+        coarse=coarse,
     )

@@ -11,7 +11,7 @@ Two predictions are offered (MODELS.md section 4):
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
 
-Outliers: q-relaxation and GOMNE (:func:`intervals.sonar.gomne`), up to ``q_max``. Each epoch
+Outliers: q-relaxation and GOMNE (:func:`intervals.localize.gomne`), up to ``q_max``. Each epoch
 ends in one of the :class:`EpochStatus`:
 
 * ``"global"``: a global search gave the set (the first epoch, and the one after an epoch
@@ -42,10 +42,11 @@ from intervals.boxes import (
     unwrap_headings,
     wrap_headings,
 )
-from intervals.engine import Engine
 from intervals.errors import IntervalError
-from intervals.imagesp import imagesp
-from intervals.sonar import SonarScan, gomne
+from intervals.imagesp import coarsen, imagesp
+from intervals.localize import TESTS_PER_BOX, gomne
+from intervals.sonar.engines import Engine
+from intervals.sonar.scan import SonarScan
 from validated_records import bounded, validate_fields
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
@@ -98,14 +99,21 @@ class TrackerSettings:
     guaranteed: bool = True
     """Keep the ``q_max``-relaxed set, which holds the truth whenever a scan has at most
     ``q_max`` outliers (true), or GOMNE's smaller set at its minimal ``q``, which can miss it
-    (false; see :func:`intervals.sonar.gomne`). The guaranteed set is much larger where few
+    (false; see :func:`intervals.localize.gomne`). The guaranteed set is much larger where few
     sensors see a wall, and a kidnapping is then detected later."""
     engine: Engine = Engine.COMPILED
     """The implementation of the sonar box test (the compiled kernel by default; ``numpy`` is
     its reference, same sets)."""
     ray_test: bool | None = None
-    """Add the ray test of :mod:`intervals.rays` to the box test (``None``: only for thin cones,
-    see :data:`intervals.sonar.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
+    """Add the ray test of :mod:`intervals.sonar.rays` to the box test (``None``: only for thin cones,
+    see :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
+    max_boxes: int = bounded(10_000, minimum=8, maximum=10_000_000, integer=True)
+    """The budget of an epoch (:func:`intervals.localize.localize`): its set holds at most this
+    many boxes, its SIVIA tests at most ``TESTS_PER_BOX`` times as many, and the IMAGESP
+    prediction makes at most ``TESTS_PER_BOX * max_boxes`` cells (else the image of the hull);
+    an epoch cut short keeps a coarser sound cover and is reported ``coarse``. The default keeps
+    a test call within a few tens of MB and 600 epochs of sets at the cap within about 350 MB
+    (57 bytes a stored box), under 1 GiB a run."""
 
     def __post_init__(self) -> None:
         validate_fields(self, IntervalError)
@@ -128,13 +136,15 @@ class EpochResult:
     wrapped to ``[-pi, pi]``); ``q``: GOMNE's minimal number of outliers explaining the scan
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
     ``guaranteed``); ``status``: an :class:`EpochStatus`; ``elapsed_s``: wall time of the
-    epoch (timing, not a result).
+    epoch (timing, not a result); ``coarse``: the budget (``max_boxes``) cut the epoch's
+    paving short or merged its boxes: the set is a coarser sound cover.
     """
 
     paving: Subpaving | None
     q: int | None
     status: EpochStatus
     elapsed_s: float = 0.0
+    coarse: bool = False
 
     @property
     def consistent(self) -> bool:
@@ -210,9 +220,17 @@ class IntervalTracker:
             return wrap_headings(self.limits(hull(boxes)[None], dt_s))
         motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
-        cells = imagesp(
-            lambda b: motion(b, dt_s), boxes, s.eps_m, scale, pitch=s.imagesp_pitch_m / scale
-        )
+        try:
+            cells = imagesp(
+                lambda b: motion(b, dt_s),
+                boxes,
+                s.eps_m,
+                scale,
+                pitch=s.imagesp_pitch_m / scale,
+                max_cells=TESTS_PER_BOX * s.max_boxes,
+            )
+        except IntervalError:  # more cells than the budget: the image of the hull, one box
+            cells = motion(hull(boxes)[None], dt_s)
         return wrap_headings(cells)
 
     def _search(self, scan: SonarScan, initial: np.ndarray):
@@ -226,6 +244,7 @@ class IntervalTracker:
             guaranteed=s.guaranteed,
             engine=s.engine,
             ray_test=s.ray_test,
+            max_boxes=s.max_boxes,
         )
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
@@ -240,5 +259,11 @@ class IntervalTracker:
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
-        paving = Subpaving(wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary))
-        return EpochResult(paving, found.q, status, time.perf_counter() - start)
+        s, coarse = self.settings, found.paving.coarse
+        inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
+        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # boxes split at the +-pi cut
+            scale = pose_scale(s.heading_scale_m_per_rad)
+            merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
+            inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True
+        paving = Subpaving(inner, boundary, coarse)
+        return EpochResult(paving, found.q, status, time.perf_counter() - start, coarse)

@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from intervals.boxes import Subpaving
-from intervals.sonar import SonarBelt, SonarScan
+from intervals.sonar.scan import SonarBelt, SonarScene
 from intervals.tracker import EpochResult, EpochStatus, IntervalTracker, TrackerSettings
 from localization.dead_reckoning import (
     DeadReckoning,
@@ -159,8 +159,11 @@ class OnlineLocalizer:
         start_pose,
     ) -> None:
         self.robot, self.belt, self.settings = robot, belt, settings
-        self._segments = np.asarray(segments, dtype=np.float64)
-        self._boundary = None if boundary is None else np.asarray(boundary, dtype=np.float64)
+        self._scene = SonarScene(  # the map checked and indexed once per run
+            np.asarray(segments, dtype=np.float64),
+            belt,
+            None if boundary is None else np.asarray(boundary, dtype=np.float64),
+        )
         self._tracker = IntervalTracker(settings.tracker, map_bounds)
         self._initial = initial_belief(start_pose, settings.start_pose_std, settings.noise)
         self._samples = _Samples()
@@ -257,7 +260,7 @@ class OnlineLocalizer:
         belief = self._advance()
         dt_s = 0.0 if self._last_epoch_t is None else t_s - self._last_epoch_t
         self._last_epoch_t = t_s
-        scan = SonarScan(self._segments, self.belt, readings, self._boundary)
+        scan = self._scene.scan(readings)
         found = self._tracker.step(self._previous, scan, dt_s)
         self._previous = found.paving
         tick = time.perf_counter()

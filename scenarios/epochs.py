@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from intervals.boxes import Subpaving, area_xy, contains_points
-from intervals.sonar import SonarBelt, SonarScan
+from intervals.sonar.scan import SonarBelt, SonarScene
 from intervals.tracker import EpochResult, EpochStatus, IntervalTracker, TrackerSettings
 
 #: The epoch states in the order of their codes in :attr:`EpochLog.status`.
@@ -45,12 +45,12 @@ class EpochRunner:
         self, tracker_settings: TrackerSettings, segments, boundary, map_bounds, belt: SonarBelt
     ):
         self._tracker = IntervalTracker(tracker_settings, map_bounds)
-        self._segments, self._boundary, self._belt = segments, boundary, belt
+        self._scene = SonarScene(segments, belt, boundary)  # the map checked once per run
         self._previous: Subpaving | None = None
 
     def step(self, readings_m: np.ndarray, dt_s: float) -> EpochResult:
         """One epoch on the scan ``readings_m (k,)`` taken ``dt_s`` after the previous one."""
-        scan = SonarScan(self._segments, self._belt, readings_m, self._boundary)
+        scan = self._scene.scan(readings_m)
         result = self._tracker.step(self._previous, scan, dt_s)
         self._previous = result.paving
         return result
@@ -66,7 +66,8 @@ class EpochLog:
     the hull of the outer set (NaN without a set; heading within one turn of the first box);
     ``components (E,)``; ``area_m2 (E,)`` (x, y) area of the union of the outer boxes (NaN
     without a set); ``contains_truth (E,)`` bool: some outer box holds the true pose (False
-    without a set); ``elapsed_s (E,)`` wall time per epoch (timing).
+    without a set); ``elapsed_s (E,)`` wall time per epoch (timing); ``coarse (E,)`` bool: the
+    tracker's budget (``max_boxes``) made the epoch's set a coarser cover.
     """
 
     t_s: np.ndarray
@@ -81,6 +82,7 @@ class EpochLog:
     area_m2: np.ndarray
     contains_truth: np.ndarray
     elapsed_s: np.ndarray
+    coarse: np.ndarray
 
     @classmethod
     def collect(cls, t_s: np.ndarray, results: list[EpochResult], truth: np.ndarray) -> EpochLog:
@@ -110,6 +112,7 @@ class EpochLog:
             area_m2=np.array([area_xy(b) if len(b) else np.nan for b in outer]),
             contains_truth=contains.astype(bool).reshape(count),
             elapsed_s=np.array([r.elapsed_s for r in results]),
+            coarse=np.array([r.coarse for r in results], dtype=bool).reshape(count),
         )
 
     def epoch_boxes(self, e: int) -> np.ndarray:

@@ -177,6 +177,7 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
         "q_used_max": int(epochs.q_used.max()) if len(epochs.t_s) else 0,
         "empty_epochs": counts["inconsistent"] + counts["lost"],
         "inconsistent_epochs": counts["inconsistent"],
+        "coarse_epochs": int(np.count_nonzero(epochs.coarse)),
         "lost_epochs": counts["lost"],
         "epoch_status": counts,
     }

@@ -26,7 +26,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from intervals.sonar import SonarBelt
+from intervals.sonar.scan import SonarBelt
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningNoise,

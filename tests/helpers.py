@@ -10,6 +10,7 @@ import signal
 
 import numpy as np
 
+from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 
 #: The default 16-sonar belt (:meth:`SonarBeltParams.default_belt`).
@@ -72,3 +73,54 @@ def small_file_limit(max_bytes: int):
         resource.setrlimit(resource.RLIMIT_FSIZE, (max_bytes, max_bytes))
 
     return limit
+
+
+def random_walled_room(rng):
+    """A 10 m x 10 m room with 2 to 8 random wall pieces inside: ``(segments, boundary)``."""
+    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
+    walls = np.stack([outer, np.roll(outer, -1, axis=0)], axis=1)
+    start = rng.uniform(0.5, 9.5, size=(rng.integers(2, 9), 2))
+    angle = rng.uniform(-np.pi, np.pi, size=len(start))
+    if rng.random() < 0.5:  # axis-parallel walls take the exact path of eq. 2
+        angle = np.round(angle / (np.pi / 2)) * (np.pi / 2)
+    length = rng.uniform(0.2, 3.0, size=len(start))
+    end = np.clip(start + length[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1), 0.1, 9.9)
+    return np.concatenate([walls, np.stack([start, end], axis=1)]), outer
+
+
+def random_belt(rng, gamma):
+    """The default 16-sonar belt, or 8 sensors with random mounts and axes (not radial)."""
+    if rng.random() < 0.5:
+        return SonarBeltParams.default_belt(
+            half_aperture_rad=gamma, d_max_m=rng.choice([3.0, 100.0])
+        )
+    mounts = rng.uniform(-0.3, 0.3, size=(8, 2))
+    return SonarBeltParams(
+        mount_xy=mounts,
+        mount_angle_rad=rng.uniform(-np.pi, np.pi, 8),
+        half_aperture_rad=gamma,
+        d_max_m=rng.choice([3.0, 100.0]),
+    )
+
+
+def random_scan_case(rng, gamma, echoes_never_lost):
+    """A random map, belt, true pose (0.3 m clear of walls) and its scan."""
+    segments, outer = random_walled_room(rng)
+    params = random_belt(rng, gamma)
+    while True:
+        truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
+        a, e = segments[:, 0], segments[:, 1] - segments[:, 0]
+        t = np.clip(np.sum((truth[:2] - a) * e, 1) / np.sum(e * e, 1), 0, 1)
+        if np.min(np.hypot(*(a + t[:, None] * e - truth[:2]).T)) > 0.3:
+            break
+    belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
+    readings = bounded_readings(cone_ranges(truth, segments, params), params, rng)
+    return SonarScan(segments, belt, readings, outer), params, truth
+
+
+def circuit_poses(epochs: int) -> np.ndarray:
+    """Poses ``(epochs, 3)`` at 1 s intervals on a circle of radius 2 m at 0.3 m/s (CCW)."""
+    omega = 0.3 / 2.0
+    t = np.arange(epochs, dtype=float)
+    heading = np.mod(omega * t + np.pi / 2 + np.pi, 2 * np.pi) - np.pi
+    return np.stack([4.5 + 2.0 * np.cos(omega * t), 3.8 + 2.0 * np.sin(omega * t), heading], 1)

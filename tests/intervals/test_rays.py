@@ -5,71 +5,35 @@ bounds (errors often exactly at the bounds), for thin (1e-6 rad) and wide (0.2 r
 random maps, random belts (mounts off the radial direction too) and boxes from 1e-6 m to 2 m
 wide. Brute force: every pose sampled in a rejected box is inconsistent with the rejecting
 sensor. Not vacuous: most boxes shifted away from the truth are rejected, and on thin cones
-it rejects boxes that :mod:`intervals.sonar` keeps.
+it rejects boxes that :mod:`intervals.sonar.cone` keeps.
 """
 
 import numpy as np
 import pytest
 
-from intervals import rays
 from intervals.boxes import contains_points, volume
 from intervals.errors import IntervalError
-from intervals.rays import (
+from intervals.localize import _uses_ray_test, gomne, localize
+from intervals.sonar import rays
+from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.rays import (
     joint_rejection_counts,
     joint_rejections,
     piece_rejections,
     ray_rejections,
     sub_boxes,
 )
-from intervals.sonar import SonarBelt, SonarScan, _uses_ray_test, gomne, localize, sensor_verdicts
+from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams
-from tests.helpers import bounded_readings, boxes_around, cone_ranges
+from tests.helpers import (
+    bounded_readings,
+    boxes_around,
+    cone_ranges,
+    random_scan_case,
+)
 
 GAMMAS_RAD = (1e-6, 0.02, 0.2)
-
-
-def _random_map(rng):
-    """A 10 m x 10 m room with 2 to 8 random wall pieces inside: ``(segments, boundary)``."""
-    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
-    walls = np.stack([outer, np.roll(outer, -1, axis=0)], axis=1)
-    start = rng.uniform(0.5, 9.5, size=(rng.integers(2, 9), 2))
-    angle = rng.uniform(-np.pi, np.pi, size=len(start))
-    if rng.random() < 0.5:  # axis-parallel walls take the exact path of eq. 2
-        angle = np.round(angle / (np.pi / 2)) * (np.pi / 2)
-    length = rng.uniform(0.2, 3.0, size=len(start))
-    end = np.clip(start + length[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1), 0.1, 9.9)
-    return np.concatenate([walls, np.stack([start, end], axis=1)]), outer
-
-
-def _random_belt(rng, gamma):
-    """The default 16-sonar belt, or 8 sensors with random mounts and axes (not radial)."""
-    if rng.random() < 0.5:
-        return SonarBeltParams.default_belt(
-            half_aperture_rad=gamma, d_max_m=rng.choice([3.0, 100.0])
-        )
-    mounts = rng.uniform(-0.3, 0.3, size=(8, 2))
-    return SonarBeltParams(
-        mount_xy=mounts,
-        mount_angle_rad=rng.uniform(-np.pi, np.pi, 8),
-        half_aperture_rad=gamma,
-        d_max_m=rng.choice([3.0, 100.0]),
-    )
-
-
-def _case(rng, gamma, echoes_never_lost):
-    """A random map, belt, true pose (0.3 m clear of walls) and its scan."""
-    segments, outer = _random_map(rng)
-    params = _random_belt(rng, gamma)
-    while True:
-        truth = np.array([*rng.uniform(0.3, 9.7, 2), rng.uniform(-np.pi, np.pi)])
-        a, e = segments[:, 0], segments[:, 1] - segments[:, 0]
-        t = np.clip(np.sum((truth[:2] - a) * e, 1) / np.sum(e * e, 1), 0, 1)
-        if np.min(np.hypot(*(a + t[:, None] * e - truth[:2]).T)) > 0.3:
-            break
-    belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
-    readings = bounded_readings(cone_ranges(truth, segments, params), params, rng)
-    return SonarScan(segments, belt, readings, outer), params, truth
 
 
 @pytest.mark.slow
@@ -80,7 +44,7 @@ def test_boxes_holding_the_truth_are_never_rejected(gamma):
     (4 heading pieces, 2 x 2 in x and y): no piece holding the truth is rejected."""
     rng = np.random.default_rng(int(gamma * 1e6) + 7)
     for case in range(200):
-        scan, _, truth = _case(rng, gamma, echoes_never_lost=case % 2 == 0)
+        scan, _, truth = random_scan_case(rng, gamma, echoes_never_lost=case % 2 == 0)
         boxes = boxes_around(truth, rng, 40)
         if case % 3 == 0:
             assert not ray_rejections(boxes, scan).any()
@@ -103,7 +67,7 @@ def test_every_pose_of_a_rejected_box_disagrees_with_the_rejecting_sensor(gamma)
     rng = np.random.default_rng(int(gamma * 1e6) + 99)
     checked = 0
     for _ in range(40):
-        scan, params, truth = _case(rng, gamma, echoes_never_lost=True)
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=True)
         centre = truth + rng.normal(0, 1, (30, 3)) * np.array([0.15, 0.15, 0.08])
         half = rng.uniform(0.005, 0.05, (30, 3))
         boxes = np.stack([centre - half, centre + half], axis=-1)
@@ -135,7 +99,7 @@ def test_most_boxes_away_from_the_truth_are_rejected_by_a_thin_cone():
     rng = np.random.default_rng(3)
     rejected = total = 0
     for _ in range(40):
-        scan, _, truth = _case(rng, 1e-6, echoes_never_lost=True)
+        scan, _, truth = random_scan_case(rng, 1e-6, echoes_never_lost=True)
         boxes = _shifted(truth, rng, 50, np.array([0.02, 0.02, 0.02]))
         rejected += np.count_nonzero(ray_rejections(boxes, scan).any(axis=1))
         total += boxes.shape[0]
@@ -145,7 +109,7 @@ def test_most_boxes_away_from_the_truth_are_rejected_by_a_thin_cone():
 @pytest.mark.parametrize("gamma", [1e-6, np.deg2rad(12.5)])
 def test_rejects_boxes_the_sonar_test_keeps(gamma):
     """Boxes near the truth in the hall: the ray test rejects boxes that
-    :func:`intervals.sonar.sensor_verdicts` keeps; on a thin cone (1e-6 rad) far more than
+    :func:`intervals.sonar.cone.sensor_verdicts` keeps; on a thin cone (1e-6 rad) far more than
     the other way round, on the real belt (12.5 deg) some (its cone-edge free-space rays)."""
     rng = np.random.default_rng(5)
     hall = builtin_map("hall")
@@ -252,8 +216,8 @@ def test_sub_boxes_cover_the_box_exactly():
     assert np.all(subs[..., 0] <= subs[..., 1])
     # along each axis the pieces' ends chain from the box's lower to its upper bound
     grid = subs.reshape(50, 3, 2, 5, 3, 2)
-    for axis, (index, count) in enumerate(((0, 3), (1, 2), (2, 5))):
-        ends = np.moveaxis(grid[..., axis, :], index + 1, 1)[:, :, 0, 0]  # (50, count, 2)
+    for axis in range(3):
+        ends = np.moveaxis(grid[..., axis, :], axis + 1, 1)[:, :, 0, 0]  # (50, count, 2)
         assert np.array_equal(ends[:, 0, 0], boxes[:, axis, 0])
         assert np.array_equal(ends[:, -1, 1], boxes[:, axis, 1])
         assert np.array_equal(ends[:, 1:, 0], ends[:, :-1, 1])
@@ -298,7 +262,9 @@ def test_compiled_engine_matches_the_numpy_reference():
     unbounded boxes, headings at +-pi and far beyond, boxes wider than the room."""
     rng = np.random.default_rng(9)
     for case in range(45):
-        scan, _, truth = _case(rng, GAMMAS_RAD[case % 3], echoes_never_lost=case % 2 == 0)
+        scan, _, truth = random_scan_case(
+            rng, GAMMAS_RAD[case % 3], echoes_never_lost=case % 2 == 0
+        )
         centre = truth + rng.normal(0, 1, (40, 3)) * np.array([0.2, 0.2, 0.1])
         half = np.exp(rng.uniform(np.log(1e-4), np.log(0.3), (40, 3)))
         half[:4] = 0.0  # points
@@ -317,12 +283,12 @@ def test_compiled_engine_matches_the_numpy_reference():
 
 
 def test_localize_and_gomne_with_the_ray_test_keep_the_truth_in_smaller_sets():
-    """The hook in :mod:`intervals.sonar`: with ``ray_test`` the sets still hold the truth (also
+    """The hook in :mod:`intervals.sonar.cone`: with ``ray_test`` the sets still hold the truth (also
     with ``q`` outliers under GOMNE) and are never larger, and strictly smaller on thin cones."""
     rng = np.random.default_rng(11)
     smaller = 0
     for trial in range(12):
-        scan, params, truth = _case(rng, GAMMAS_RAD[trial % 2], echoes_never_lost=True)
+        scan, params, truth = random_scan_case(rng, GAMMAS_RAD[trial % 2], echoes_never_lost=True)
         prior = np.stack([truth - [0.4, 0.4, 0.15], truth + [0.4, 0.4, 0.15]], axis=-1)
         plain = localize(scan, prior, 0.05, ray_test=False)
         joint = localize(scan, prior, 0.05, ray_test=True)

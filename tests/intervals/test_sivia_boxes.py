@@ -96,9 +96,57 @@ def test_sivia_accepts_initial_subpaving_and_checks_preconditions():
     with pytest.raises(IntervalError, match="bounded"):
         sivia(test, np.array([[0.0, np.inf], [0.0, 1.0]]), eps=0.1)
     with pytest.raises(IntervalError, match="max_boxes"):
-        sivia(lambda b: np.full(b.shape[0], UNDECIDED, np.int8), halves, eps=1e-3, max_boxes=100)
+        sivia(test, halves, eps=0.1, max_boxes=0)
+    with pytest.raises(IntervalError, match="max_tested"):
+        sivia(test, halves, eps=0.1, max_tested=-1)
     with pytest.raises(IntervalError, match="test returned"):
         sivia(lambda b: np.full(b.shape[0], 7, np.int8), halves, eps=0.1)
+
+
+def test_sivia_in_chunks_and_under_a_test_budget():
+    """A frontier larger than ``max_boxes`` is tested in chunks (no call sees more, same
+    set); with ``max_tested`` the paving stops, is marked coarse, and still covers the set
+    (every point of the fine outer set, which holds the set, is in the coarse one); an
+    everywhere-undecided test at a tiny eps (10^8 boxes at the end) stops in bounded work."""
+    rng = np.random.default_rng(2)
+    landmarks = np.array([[0.0, 0.0], [4.0, 0.0]])
+    ranges = np.array([[2.0, 2.2], [2.8, 3.0]])  # two lenses, mirror images about y = 0
+    seen = []
+
+    def test(boxes):
+        seen.append(boxes.shape[0])
+        return range_only_test(landmarks, ranges)(boxes)
+
+    box = np.array([[-5.0, 5.0], [-5.0, 5.0]])
+    whole = sivia(test, box, eps=0.01)
+    assert not whole.coarse and max(seen) > 200
+    seen.clear()
+    chunked = sivia(test, box, eps=0.01, max_boxes=60)
+    assert max(seen) <= 60 and not chunked.coarse
+    order = np.lexsort(whole.boundary.reshape(-1, 4).T)
+    np.testing.assert_array_equal(
+        np.sort(chunked.boundary.reshape(-1, 4), axis=0),
+        np.sort(whole.boundary.reshape(-1, 4), axis=0),
+    )
+    assert order.size == chunked.boundary.shape[0]
+    points = np.concatenate(
+        [rng.uniform(b[:, 0], b[:, 1], size=(20, 2)) for b in whole.outer]
+    )  # points of the fine outer set
+    for budget in (0, 10, 200, 1000):  # the whole paving tests 1169 boxes
+        seen.clear()
+        coarse = sivia(test, box, eps=0.01, max_boxes=60, max_tested=budget)
+        assert sum(seen) <= budget and coarse.coarse
+        assert coarse.contains(points).all()
+    seen.clear()
+    undecided = sivia(
+        lambda b: (seen.append(b.shape[0]), np.full(b.shape[0], UNDECIDED, np.int8))[1],
+        box,
+        eps=1e-4,
+        max_boxes=1000,
+        max_tested=20_000,
+    )
+    assert undecided.coarse and sum(seen) <= 20_000 and undecided.boundary.shape[0] < 30_000
+    assert undecided.contains(rng.uniform(-5, 5, size=(1000, 2))).all()
 
 
 def test_bisect_scaled_axis_and_union():
@@ -196,3 +244,120 @@ def test_imagesp_unique_rows_equals_numpy_unique():
     for rows, cols, spread in [(1, 3, 2), (50, 3, 3), (400, 3, 5), (300, 2, 1000), (200, 1, 4)]:
         idx = rng.integers(-spread, spread, size=(rows, cols), dtype=np.int64)
         np.testing.assert_array_equal(_unique_rows(idx), np.unique(idx, axis=0))
+
+
+def _brute_components(boxes, periodic_axis=None, period=2.0 * np.pi):
+    """The all-pairs definition: boxes ``i, j`` touch when their closed intervals meet on every
+    axis (the periodic one also shifted by -+period); components by a depth-first search."""
+    lo, hi = boxes[:, None, :, 0], boxes[:, None, :, 1]
+    lo_t, hi_t = boxes[None, :, :, 0], boxes[None, :, :, 1]
+    touch = (lo <= hi_t) & (lo_t <= hi)
+    if periodic_axis is not None:
+        a = periodic_axis
+        for shift in (-period, period):
+            touch[..., a] |= (lo[..., a] + shift <= hi_t[..., a]) & (
+                lo_t[..., a] <= hi[..., a] + shift
+            )
+    adjacent = np.all(touch, axis=-1)
+    labels = np.full(boxes.shape[0], -1)
+    count = 0
+    for start in range(boxes.shape[0]):
+        if labels[start] >= 0:
+            continue
+        stack, labels[start] = [start], count
+        while stack:
+            node = stack.pop()
+            for other in np.flatnonzero(adjacent[node] & (labels < 0)):
+                labels[other] = count
+                stack.append(other)
+        count += 1
+    return count, labels
+
+
+def _random_grid_boxes(rng, n, d, cells):
+    """Boxes with integer bounds on a small grid: shared faces, edges and corners are common."""
+    lo = rng.integers(0, cells, size=(n, d))
+    width = rng.integers(0, 3, size=(n, d))
+    return np.stack([lo, lo + width], axis=-1).astype(float)
+
+
+@pytest.mark.parametrize("brute_force_boxes", [bx.COMPONENT_BRUTE_FORCE_BOXES, 0])
+def test_components_equal_the_all_pairs_partition(monkeypatch, brute_force_boxes):
+    """Random box sets (2 and 3 axes, with and without a periodic heading) give the partition
+    and the labels of the all-pairs definition, corner contacts included, both with the
+    all-pairs comparison of small sets and with the k-d tree on every set (threshold 0)."""
+    monkeypatch.setattr(bx, "COMPONENT_BRUTE_FORCE_BOXES", brute_force_boxes)
+    rng = np.random.default_rng(5)
+    corner = np.array([[[0, 1], [0, 1]], [[1, 2], [1, 2]], [[2.5, 3], [0, 1]]], dtype=float)
+    count, labels = bx.connected_components(corner)  # a shared corner connects
+    assert count == 2 and tuple(labels) == (0, 0, 1)
+    for trial in range(300):
+        d = 2 + trial % 2
+        boxes = _random_grid_boxes(rng, int(rng.integers(1, 60)), d, int(rng.integers(3, 15)))
+        periodic = None
+        if d == 3 and trial % 4 == 1:  # headings on a turn of 8 units near the cut
+            periodic = 2
+            boxes[:, 2] = boxes[:, 2] % 8 - 4
+            boxes[:, 2, 1] = np.maximum(boxes[:, 2, 1], boxes[:, 2, 0])
+        period = 8.0 if periodic is not None else 2.0 * np.pi
+        count, labels = bx.connected_components(boxes, periodic, period)
+        expected_count, expected = _brute_components(boxes, periodic, period)
+        assert count == expected_count
+        np.testing.assert_array_equal(labels, expected)  # same partition, same numbering
+
+
+def test_components_of_one_periodic_axis():
+    """d = 1, the axis periodic: intervals joined across the wrap and only there."""
+    rng = np.random.default_rng(8)
+    for _ in range(100):
+        lo = rng.uniform(-np.pi, np.pi, size=int(rng.integers(1, 30)))
+        boxes = np.stack([lo, lo + rng.uniform(0, 0.5, size=lo.size)], axis=-1)[:, None, :]
+        count, labels = bx.connected_components(boxes, 0)
+        expected_count, expected = _brute_components(boxes, 0)
+        assert count == expected_count
+        np.testing.assert_array_equal(labels, expected)
+
+
+def test_components_of_a_large_paving():
+    """200 000 boxes of a regular paving in three strips (x, y, heading): three components.
+    The all-pairs definition would need 200 000^2 x 3 bytes (120 GB)."""
+    nx, ny, nt = 500, 20, 20
+    ix, iy, it = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nt), indexing="ij")
+    keep = iy % 7 != 6  # strips of 6 rows of cells, 1 row apart
+    cells = (
+        np.stack([ix[keep], iy[keep], it[keep]], axis=-1).astype(float) * 0.0625
+    )  # exact neighbours
+    boxes = np.stack([cells, cells + 0.0625], axis=-1)
+    count, labels = bx.connected_components(boxes)
+    assert boxes.shape[0] > 150_000 and count == 3
+    np.testing.assert_array_equal(labels, iy[keep] // 7)
+
+
+def _pair_set(i, j):
+    return set(zip(i.tolist(), j.tolist(), strict=True))
+
+
+def test_touching_pairs_of_mixed_sizes_and_by_sweep():
+    """Float boxes of sizes spread over three orders of magnitude (the wide boxes take the
+    recursive and the ball searches; sets where most boxes are wide take the sweep), with and
+    without a periodic heading: exactly the pairs of the all-pairs definition."""
+    rng = np.random.default_rng(11)
+    for trial in range(120):
+        n = int(rng.integers(65, 1500))
+        lo = rng.uniform(-3.0, 3.0, size=(n, 3))
+        width = rng.uniform(0.05, 0.1, size=(n, 3))  # a paving's boxes, some of them flat
+        width[rng.uniform(size=n) < 0.05] = 0.0
+        wide = rng.uniform(size=n) < (0.15, 0.6, 0.0)[trial % 3]
+        width[wide] = 10.0 ** rng.uniform(-1, 0.5, size=(np.count_nonzero(wide), 3))
+        boxes = np.stack([lo, lo + width], axis=-1)
+        periodic = 2 if trial % 2 else None
+        lo_t, hi_t = boxes[:, None, :, 0], boxes[:, None, :, 1]
+        touch = (lo_t <= np.swapaxes(hi_t, 0, 1)) & (np.swapaxes(lo_t, 0, 1) <= hi_t)
+        if periodic is not None:
+            for shift in (-2.0 * np.pi, 2.0 * np.pi):
+                a = lo_t[..., 2] + shift <= np.swapaxes(hi_t, 0, 1)[..., 2]
+                touch[..., 2] |= a & (np.swapaxes(lo_t, 0, 1)[..., 2] <= hi_t[..., 2] + shift)
+        i, j = np.nonzero(np.triu(np.all(touch, axis=-1), 1))
+        expected = _pair_set(i, j)
+        assert _pair_set(*bx.touching_pairs(boxes, periodic)) == expected
+        assert _pair_set(*bx._sweep_pairs(boxes, periodic, 2.0 * np.pi)) == expected

@@ -9,16 +9,10 @@ import pytest
 
 from intervals.boxes import contains_points
 from intervals.errors import IntervalError
+from intervals.localize import box_test, gomne, localize
 from intervals.sivia import OUTSIDE
-from intervals.sonar import (
-    SonarBelt,
-    SonarScan,
-    box_test,
-    gomne,
-    localize,
-    reading_intervals,
-)
-from intervals.sonar import _sensor_boxes as sensor_boxes
+from intervals.sonar.cone import _sensor_boxes as sensor_boxes
+from intervals.sonar.scan import SonarBelt, SonarScan, reading_intervals
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams
 from tests.helpers import bounded_readings, boxes_around, cone_ranges, random_room

@@ -1,4 +1,4 @@
-"""The compiled sonar box test (``intervals.sonar_kernel``) against its numpy reference.
+"""The compiled sonar box test (``intervals.sonar.cone_kernel``) against its numpy reference.
 
 Random maps, poses, belts (the default one and random non-radial ones, apertures from 1e-3 to
 1.2 rad), readings with errors at their bounds, outliers, lost echoes (ignored, or free space
@@ -13,27 +13,17 @@ import dataclasses
 import numpy as np
 import pytest
 
-from intervals import sonar_kernel
-from intervals.engine import Engine
 from intervals.errors import IntervalError
 from intervals.interval import TRIG_EXACT_LIMIT_RAD
+from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE
-from intervals.sonar import (
-    _ANGLE_MARGIN_RAD,
-    _ARC_SLACK,
-    ECHO,
-    FREE,
-    GUARD_M,
-    IGNORED,
-    SonarBelt,
-    SonarScan,
-    _heading_trig,
-    _sensor_boxes,
-    box_test,
-    gomne,
-    localize,
-    sensor_verdicts,
-)
+from intervals.sonar import cone_kernel
+from intervals.sonar.cone import _heading_trig, _sensor_boxes, sensor_verdicts
+from intervals.sonar.engines import Engine
+from intervals.sonar.geometry import ANGLE_MARGIN_RAD as _ANGLE_MARGIN_RAD
+from intervals.sonar.geometry import ARC_SLACK as _ARC_SLACK
+from intervals.sonar.geometry import GUARD_M
+from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams
@@ -106,16 +96,19 @@ def test_compiled_verdicts_equal_the_numpy_reference():
     """200 random cases x 180 boxes: per-sensor reject / certain and the box verdicts at
     q = 0..3 agree everywhere; the cases reach every kind of reading and verdict."""
     rng = np.random.default_rng(31)
-    seen = dict(
-        reject=0,
-        keep=0,
-        certain=0,
-        free=0,
-        ignored=0,
-        impossible=0,
-        inside=0,
-        outside=0,
-        sensor_verdicts=0,
+    seen = dict.fromkeys(
+        (
+            "reject",
+            "keep",
+            "certain",
+            "free",
+            "ignored",
+            "impossible",
+            "inside",
+            "outside",
+            "sensor_verdicts",
+        ),
+        0,
     )
     for _ in range(200):
         scan, boxes = _case(rng)
@@ -155,9 +148,9 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
         )
         reference = _sensor_boxes(boxes, belt)
         cos_theta, sin_theta = _heading_trig(boxes)
-        rows = np.empty((belt.count, sonar_kernel.SENSOR_COLUMNS))
+        rows = np.empty((belt.count, cone_kernel.SENSOR_COLUMNS))
         for n in range(boxes.shape[0]):
-            sure = sonar_kernel._sensor_rows(
+            sure = cone_kernel._sensor_rows(
                 boxes[n],
                 cos_theta[n],
                 sin_theta[n],

@@ -7,24 +7,17 @@ import numpy as np
 import pytest
 
 from intervals.boxes import unwrap_headings
-from intervals.engine import Engine
 from intervals.errors import IntervalError
-from intervals.sonar import SonarBelt, SonarScan
+from intervals.sonar.engines import Engine
+from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+from tests.helpers import circuit_poses
 
 PARAMS = SonarBeltParams.default_belt()
 HALL = builtin_map("hall")
 BELT = SonarBelt.from_params(PARAMS)
-
-
-def _circuit(epochs: int) -> np.ndarray:
-    """Poses ``(epochs, 3)`` at 1 s intervals on a circle of radius 2 m at 0.3 m/s (CCW)."""
-    omega = 0.3 / 2.0
-    t = np.arange(epochs, dtype=float)
-    heading = np.mod(omega * t + np.pi / 2 + np.pi, 2 * np.pi) - np.pi
-    return np.stack([4.5 + 2.0 * np.cos(omega * t), 3.8 + 2.0 * np.sin(omega * t), heading], 1)
 
 
 def _scan(truth, rng, outliers=0):
@@ -50,12 +43,12 @@ def _tracker(kind, q_max=1, guaranteed=True):
 
 def test_both_trackers_keep_the_truth_and_imagesp_is_not_looser():
     rng = np.random.default_rng(3)
-    poses = _circuit(14)
+    poses = circuit_poses(14)
     scans = [_scan(p, rng, outliers=int(i % 5 == 3)) for i, p in enumerate(poses)]
     areas = {}
     for kind in ("sivia", "imagesp"):
         tracker, previous, area = _tracker(kind), None, []
-        for i, (truth, scan) in enumerate(zip(poses, scans)):
+        for i, (truth, scan) in enumerate(zip(poses, scans, strict=True)):
             result = tracker.step(previous, scan, 1.0)
             assert result.consistent and result.status == ("global" if i == 0 else "tracking")
             assert result.paving.contains(truth[None])[0], (kind, i)
@@ -69,7 +62,7 @@ def test_both_trackers_keep_the_truth_and_imagesp_is_not_looser():
 def test_kidnapping_is_detected_and_relocalised():
     rng = np.random.default_rng(4)
     tracker, previous = _tracker("sivia", q_max=0), None
-    for truth in _circuit(3):
+    for truth in circuit_poses(3):
         previous = tracker.step(previous, _scan(truth, rng), 1.0).paving
     kidnapped = np.array([8.0, 6.5, -2.0])  # 4 m away: out of reach of v_max dt
     result = tracker.step(previous, _scan(kidnapped, rng), 1.0)
@@ -84,7 +77,7 @@ def test_kidnapping_is_detected_and_relocalised():
 def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
     rng = np.random.default_rng(5)
     tracker = _tracker("sivia", q_max=0)
-    truth = _circuit(1)[0]
+    truth = circuit_poses(1)[0]
     first = tracker.step(None, _scan(truth, rng), 1.0)
     # every sensor sees a wall at 1 m: nowhere in the hall (checked globally below)
     absurd = SonarScan(HALL.segments, BELT, np.full(16, 1.0), HALL.boundary)
@@ -100,7 +93,7 @@ def test_too_many_outliers_give_an_inconsistent_epoch_then_a_global_restart():
 
 def test_an_epoch_reports_its_boxes_components_and_hull():
     rng = np.random.default_rng(6)
-    truth = _circuit(1)[0]
+    truth = circuit_poses(1)[0]
     result = _tracker("sivia").step(None, _scan(truth, rng), 1.0)
     outer = result.outer
     assert outer.shape[0] == result.inner_mask.shape[0] > 0

@@ -86,7 +86,7 @@ def check_sound_fusion(estimation):
 )
 def test_bounded_errors_and_at_most_q_outliers_keep_the_truth_in_the_set(name, seed):
     spec = load_scenario(name).with_run(seed=seed, duration_s=SHORT_S)
-    # seeds 2 and 3 add the ray test (intervals.rays) to the box test, at q_max 1 and 2
+    # seeds 2 and 3 add the ray test (intervals.sonar.rays) to the box test, at q_max 1 and 2
     spec = with_estimation(spec, q_max=1 + seed % 2, ray_test=seed in (2, 3))
     log = simulate_spec(spec)
     bad = with_outliers(log, spec.estimation.intervals.q_max, np.random.default_rng(seed))

@@ -1,6 +1,6 @@
 r"""Ray tests of the sonar cone model on pose boxes: the heading kept as one variable.
 
-Why. :mod:`intervals.sonar` bounds the sensor position ``s(p)`` by a box that ranges
+Why. :mod:`intervals.sonar.cone` bounds the sensor position ``s(p)`` by a box that ranges
 independently of the cone direction, and its free-space test needs a direction that is in
 the cone for every heading of the box. For a thin cone (half-aperture ``gamma`` below the
 heading width of the box) the first is loose and the second never fires. Here every point of
@@ -63,7 +63,7 @@ Enclosures over a box (or a piece of one, below):
   part of the coupling between (1) and (2), which share ``x, y`` and ``B``.
 
 Tests, for sensor ``i`` with the distance interval ``[lo, hi]`` of its reading
-(:func:`intervals.sonar.reading_intervals`, outward rounded), on a piece:
+(:func:`intervals.sonar.scan.reading_intervals`, outward rounded), on a piece:
 
 * **Hit test** (an echo: ``hi`` finite). If ``d_i(p) in [lo, hi]`` for a pose ``p`` of the
   piece, the nearest cone point ``P`` lies on some segment ``j`` at distance ``d_i(p)`` in a
@@ -79,13 +79,13 @@ Tests, for sensor ``i`` with the distance interval ``[lo, hi]`` of its reading
   L]``, ``0 <= lambda`` and ``lambda < lo - GUARD_M``), the meeting point is a map point in
   the cone nearer than ``lo``, so ``d_i(p) < lo``: the piece is rejected by the sensor.
 * An empty reading interval (``lo > hi``: no fault-free reading gives it) rejects every piece,
-  as in :mod:`intervals.sonar`; ignored sensors never reject.
+  as in :mod:`intervals.sonar.cone`; ignored sensors never reject.
 
 A box is rejected by sensor ``i`` (:func:`ray_rejections`) when every piece is; jointly
 (:func:`joint_rejections`) when in every piece more than ``q`` sensors reject the piece (a
 pose of the box lies in some piece, where more than ``q`` readings cannot be explained).
 
-Engines (:class:`intervals.engine.Engine`): the numpy reference evaluates all of the above on arrays of
+Engines (:class:`intervals.sonar.engines.Engine`): the numpy reference evaluates all of the above on arrays of
 (piece, sensor, segment) triples; the compiled kernel (numba) performs the same operations in
 the same order, triple by triple, and stops early: a sensor's piece is decided once one
 segment passes the hit test and one surely meets a free-space ray, and it skips the
@@ -104,8 +104,8 @@ IEEE operation. ``sin``/``cos`` at the ends of ``B`` (numpy's or numba's, whose 
 measured errors are a few ulps) are enclosed by ``+- TRIG_TOL = 2e-15``: at least 9 ulps of
 a value in ``[-1, 1]`` (an ulp there is at most ``2^-52 = 2.2e-16``), which also covers the
 rounding of that addition; the sign decisions demand a margin of ``TRIG_TOL``. Every
-comparison is moreover biased toward keeping the box by :data:`intervals.sonar.GUARD_M` (as
-in :mod:`intervals.sonar`): a miss needs ``lambda`` outside ``[lo - GUARD_M, hi + GUARD_M]``,
+comparison is moreover biased toward keeping the box by :data:`intervals.sonar.geometry.GUARD_M` (as
+in :mod:`intervals.sonar.cone`): a miss needs ``lambda`` outside ``[lo - GUARD_M, hi + GUARD_M]``,
 ``t L`` outside ``[-GUARD_M, L + GUARD_M]`` or a far segment beyond ``hi + GUARD_M + rho``,
 a sure meeting ``lambda < lo - GUARD_M``. A NaN bound (unbounded inputs) fails every strict
 comparison and so keeps the box; unbounded intervals are not cut into pieces.
@@ -119,10 +119,11 @@ import numba
 import numpy as np
 
 from intervals import interval as ia
-from intervals import sonar  # the module, not names: intervals.sonar may import this module
 from intervals.boxes import as_boxes
-from intervals.engine import Engine
 from intervals.errors import IntervalError
+from intervals.sonar.engines import Engine
+from intervals.sonar.geometry import GUARD_M
+from intervals.sonar.scan import ECHO, FREE, SonarScan
 
 DEFAULT_PIECES = (1, 1, 4)
 """Pieces ``(px, py, pt)`` along x, y and theta into which each box is cut (see the module
@@ -146,9 +147,9 @@ module doc: at least 9 ulps there; it also covers the rounding of ``+- TRIG_TOL`
 MAX_B_WIDTH_RAD = 3.0
 """Widest ``B`` interval on which ``sin B`` is claimed to keep one sign (below pi)."""
 
-
 BLOCK_ELEMENTS = 1 << 18
-"""Largest number of (piece, sensor, segment) triples evaluated in one numpy pass."""
+"""Largest number of (piece, sensor, segment) triples evaluated in one numpy pass, and of
+(piece, segment) pairs whose terms the compiled engine is given at once."""
 
 
 def _down(x):
@@ -159,7 +160,7 @@ def _up(x):
     return np.nextafter(x, np.inf)
 
 
-def _mul(a_lo, a_hi, b_lo, b_hi):
+def _mul(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
     """``[a] * [b]`` rounded outward, finite bounds (component arrays, broadcast)."""
     p = (a_lo * b_lo, a_lo * b_hi, a_hi * b_lo, a_hi * b_hi)
     return (
@@ -168,12 +169,12 @@ def _mul(a_lo, a_hi, b_lo, b_hi):
     )
 
 
-def _add(a_lo, a_hi, b_lo, b_hi):
+def _add(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
     """``[a] + [b]`` rounded outward."""
     return _down(a_lo + b_lo), _up(a_hi + b_hi)
 
 
-def _sub(a_lo, a_hi, b_lo, b_hi):
+def _sub(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
     """``[a] - [b]`` rounded outward."""
     return _down(a_lo - b_hi), _up(a_hi - b_lo)
 
@@ -182,7 +183,7 @@ def _point(values) -> np.ndarray:
     return ia.interval(np.asarray(values, dtype=np.float64))
 
 
-def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi):
+def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi) -> tuple[np.ndarray, np.ndarray]:
     """``(lower, upper)`` of ``[c] / [s]`` for ``0 < s_lo <= s_hi`` (rounded outward)."""
     return (
         _down(c_lo / np.where(c_lo >= 0.0, s_hi, s_lo)),
@@ -190,7 +191,15 @@ def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi):
     )
 
 
-def _sine_terms(b_lo, b_hi):
+def _sine_terms(
+    b_lo, b_hi
+) -> tuple[
+    np.ndarray,
+    tuple[np.ndarray, np.ndarray],
+    tuple[np.ndarray, np.ndarray],
+    tuple[np.ndarray, np.ndarray],
+    np.ndarray,
+]:
     """Over the intervals ``[b_lo, b_hi]`` (component arrays): ``one_sign`` (``sin`` keeps a
     strict sign), the intervals ``(lo, hi)`` of ``1 / sin``, of ``cot`` and of ``sin`` (set to
     0 where not ``one_sign``), and an upper bound of ``|sin|`` (everywhere). See the module
@@ -215,7 +224,7 @@ def _sine_terms(b_lo, b_hi):
         gl - TRIG_TOL, gl + TRIG_TOL, np.where(one_sign, al - TRIG_TOL, 1.0), al + TRIG_TOL
     )
     zero = np.zeros_like(b_lo)
-    inv = tuple(np.where(one_sign, v, 0.0) for v in inv)
+    inv = (np.where(one_sign, inv[0], 0.0), np.where(one_sign, inv[1], 0.0))
     cot = (np.where(one_sign, at_hi[0], zero), np.where(one_sign, at_lo[1], zero))
     sin = (
         np.where(pos, small, np.where(neg, -big, 0.0)),
@@ -297,7 +306,7 @@ def _ray_meeting(b, kappa_terms, pose_terms, x, y, seg, slanted, reading=None):
     if reading is not None:
         with np.errstate(invalid="ignore"):  # inf * 0: a no-echo sensor's hi (unused) times
             # the placeholder 0 of sin B where it changes sign (overwritten below)
-            h = _mul(*_add(*_add(*reading, *rc), *rs_cot), *sin)  # (eq. 3)
+            h = _mul(*_add(*_add(reading[0], reading[1], *rc), *rs_cot), *sin)  # (eq. 3)
         h = (np.maximum(gl[0], h[0]), np.minimum(gl[1], h[1]))
         narrowed = _sub(*_sub(*_mul(*cot, *h), *we), *rs_inv)
         none = h[0] > h[1]
@@ -446,7 +455,7 @@ def _k_piece_rejections(
     ``bbox (m, 4)``: the segments' bounding boxes (:func:`_box_gap`);
     ``slanted (m,)`` bool; ``base (D, k, m, 2)``: epsilon - alpha - delta for the hit ray
     (``D = 0``) and the free-space rays; ``kappa (D, k, 2, 2)``: rho cos kappa, rho sin kappa;
-    ``kind (k,)`` int8 of :mod:`intervals.sonar`."""
+    ``kind (k,)`` int8 of :mod:`intervals.sonar.scan`."""
     n_parts, n_rays, k, m = parts.shape[0], base.shape[0], base.shape[1], base.shape[2]
     trig = np.empty(8)
     res = np.empty(4)
@@ -543,16 +552,16 @@ def _k_piece_rejections(
 
 
 def _checked(boxes, scan, pieces) -> tuple[np.ndarray, tuple[int, int, int]]:
-    if not isinstance(scan, sonar.SonarScan):
+    if not isinstance(scan, SonarScan):
         raise IntervalError(
-            f"ray test: expected an intervals.sonar.SonarScan, got {type(scan).__name__}"
+            f"ray test: expected an intervals.sonar.scan.SonarScan, got {type(scan).__name__}"
         )
     if not (len(pieces) == 3 and all(isinstance(c, (int, np.integer)) and c >= 1 for c in pieces)):
         raise IntervalError(f"ray test: pieces must be three integers >= 1, got {pieces!r}")
     boxes = as_boxes(boxes, "ray test boxes")
     if boxes.shape[1] != 3:
         raise IntervalError(f"ray test: pose boxes must be (N, 3, 2), got {boxes.shape}")
-    return boxes, tuple(int(c) for c in pieces)
+    return boxes, (int(pieces[0]), int(pieces[1]), int(pieces[2]))
 
 
 def _ray_constants(scan) -> dict:
@@ -629,9 +638,9 @@ def _numpy_block(parts, scan, const, reject) -> None:
     """One block of :func:`_numpy_pieces` (``reject`` is a view, updated in place)."""
     seg, rays, rho_hi = const["seg"], const["rays"], const["rho_hi"]
     slanted = np.flatnonzero(const["slanted"])
-    echo, free = scan.kind == sonar.ECHO, scan.kind == sonar.FREE
+    echo, free = scan.kind == ECHO, scan.kind == FREE
     lo, hi = scan.ranges[None, :, None, 0], scan.ranges[None, :, None, 1]
-    guard = sonar.GUARD_M  # metres, in favour of keeping the box
+    guard = GUARD_M  # metres, in favour of keeping the box
     length_lo, length_hi = seg["L"][..., 0], seg["L"][..., 1]
     part = parts[:, :, None, None]  # (B, 3, 1, 1, 2)
     x, y, theta = part[:, 0], part[:, 1], part[:, 2]  # (B, 1, 1, 2)
@@ -696,23 +705,23 @@ def _compiled_pieces(parts, scan, const, reject) -> None:
         np.ascontiguousarray(scan.ranges[:, 1]),
         np.ascontiguousarray(scan.kind),
         np.ascontiguousarray(const["rho_hi"][0, :, 0]),
-        float(sonar.GUARD_M),
+        float(GUARD_M),
         out,
     )
     reject |= out
 
 
 def piece_rejections(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N, P, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of piece
     ``j`` of box ``n`` (the sub-boxes of :func:`sub_boxes`, ``P = px * py * pt``).
 
     ``boxes``: pose boxes ``(N, 3, 2)`` (x_m, y_m, theta_rad); ``scan``: readings, belt and map
-    (:class:`intervals.sonar.SonarScan`; the scan :meth:`~intervals.sonar.SonarScan.restricted_to`
+    (:class:`intervals.sonar.scan.SonarScan`; the scan :meth:`~intervals.sonar.scan.SonarScan.restricted_to`
     the boxes gives the same soundness, faster: it keeps every segment within reach, all the hit
     test needs, and the free-space test is sound with any subset); ``pieces``: ``(px, py, pt)``;
-    ``engine``: an :class:`~intervals.engine.Engine`. Sound for the cone model of :mod:`intervals.sonar` at
+    ``engine``: an :class:`~intervals.sonar.engines.Engine`. Sound for the cone model of :mod:`intervals.sonar.cone` at
     every half-aperture, tight for a ray (see the module doc). The numpy engine is vectorised
     over pieces, sensors and segments in blocks of about :data:`BLOCK_ELEMENTS` triples; the
     compiled one loops over them in one call.
@@ -721,31 +730,37 @@ def piece_rejections(
     if engine not in tuple(Engine):
         raise IntervalError(f"ray test: engine must be one of {', '.join(Engine)}, got {engine!r}")
     n, p, k, m = boxes.shape[0], int(np.prod(pieces)), scan.belt.count, scan.segments.shape[0]
-    echo = scan.kind == sonar.ECHO
+    echo = scan.kind == ECHO
     reject = np.broadcast_to(echo & (scan.ranges[:, 0] > scan.ranges[:, 1]), (n * p, k)).copy()
     if m == 0 or n == 0:
         return (reject | echo).reshape(n, p, k)  # an echo needs a segment to come from
     parts = sub_boxes(boxes, pieces).reshape(n * p, 3, 2)
-    run = _compiled_pieces if engine == Engine.COMPILED else _numpy_pieces
-    run(parts, scan, _ray_constants(scan), reject)
+    if engine == Engine.NUMPY:
+        _numpy_pieces(parts, scan, _ray_constants(scan), reject)
+    else:  # in blocks of pieces: the per-(piece, segment) terms are arrays
+        const, block = _ray_constants(scan), max(1, BLOCK_ELEMENTS // m)
+        for start in range(0, parts.shape[0], block):
+            _compiled_pieces(
+                parts[start : start + block], scan, const, reject[start : start + block]
+            )
     return reject.reshape(n, p, k)
 
 
 def ray_rejections(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of box ``n``
     (it rejects every piece; see :func:`piece_rejections`)."""
-    return piece_rejections(boxes, scan, pieces, engine).all(axis=1)
+    return np.asarray(piece_rejections(boxes, scan, pieces, engine).all(axis=1))
 
 
 def joint_rejection_counts(
-    boxes, scan: sonar.SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
+    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
 ) -> np.ndarray:
     """``(N,)`` int: over the pieces of box ``n``, the smallest number of sensors rejecting the
     piece. A box with a count above ``q`` holds no pose that leaves at most ``q`` readings
     unexplained (each pose lies in some piece). ``other``: ``(N, k)`` rejections of another
-    sound test on the whole boxes (e.g. :func:`intervals.sonar.sensor_verdicts`), counted in
+    sound test on the whole boxes (e.g. :func:`intervals.sonar.cone.sensor_verdicts`), counted in
     every piece; the count is then at least that test's own count.
     """
     rejected = piece_rejections(boxes, scan, pieces, engine)
@@ -756,7 +771,7 @@ def joint_rejection_counts(
 
 def joint_rejections(
     boxes,
-    scan: sonar.SonarScan,
+    scan: SonarScan,
     q: int = 0,
     pieces=DEFAULT_PIECES,
     other=None,

@@ -1,23 +1,24 @@
 r"""The compiled sonar box test (numba): every box, sensor and segment of one test call at once.
 
-:func:`intervals.sonar.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
+:func:`intervals.sonar.cone.sensor_verdicts` calls :func:`sensor_verdicts_into` once per test call
 (one SIVIA level). For each pose box the kernel builds the sensor-position boxes and the wedge
-half-planes of every sensor, keeps the segments within reach of their hull, and runs the hit
+half-planes of every sensor, keeps the segments within reach of their hull (looked up in the
+scene's :mod:`intervals.sonar.segment_grid`, not the whole map), and runs the hit
 test, the free-space test and (optionally) the inner acceptance of the module doc of
-:mod:`intervals.sonar` on every (segment, used sensor) pair, with scalar loops instead of
+:mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
 sensors leave. It is the same computation as the numpy implementation there (the
 reference it is tested against, ``tests/intervals/test_sonar_kernel.py``): the same formulas,
 evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
 into fused multiply-adds without ``fastmath``), with the same ``GUARD_M`` biases, sensor-box
-margin, ``_arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
+margin, ``arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
 outward-rounded reading intervals (computed once per scan by numpy) and the same ``cos`` and
 ``sin`` of the heading bounds (computed by numpy per call, so that no libm-versus-numpy ulp
-difference can arise; it would be covered anyway: the error budget of :mod:`intervals.sonar`
+difference can arise; it would be covered anyway: the error budget of :mod:`intervals.sonar.geometry`
 allows a few ulps, ``1e-15``, per direction component against a sensor-box widening of ``1e-9 (1
 + |m_i|)`` m and ``GUARD_M = 1e-5`` m on every comparison). ``hypot`` is the C library's in
 both, ``abs``, ``min`` and ``max`` are exact. So every verdict equals the reference's bit for bit
-and every guarantee of :mod:`intervals.sonar` holds unchanged; the tests check equality over
+and every guarantee of :mod:`intervals.sonar.cone` holds unchanged; the tests check equality over
 random cases.
 
 Shapes and units: ``N`` boxes ``(N, 3, 2)`` (x m, y m, theta rad; lower, upper), ``m`` segments
@@ -35,9 +36,9 @@ import numpy as np
 
 IGNORED, ECHO, FREE = 0, 1, 2
 """Kinds of sensor constraint: no information, an echo ``[lo, hi]``, free space to ``d_max``
-(re-exported by :mod:`intervals.sonar`)."""
+(re-exported by :mod:`intervals.sonar.scan`)."""
 
-# columns of the belt table (k, 8) built by intervals.sonar.SonarBelt.kernel_table
+# columns of the belt table (k, 8) built by intervals.sonar.scan.SonarBelt.kernel_table
 COS_BETA, SIN_BETA, R_LO, R_HI, COS_RIGHT, SIN_RIGHT, COS_LEFT, SIN_LEFT = range(8)
 
 # columns of the per-sensor scratch rows of one box: sensor box, union and intersection
@@ -67,7 +68,7 @@ def _min(a: float, b: float) -> float:
 @numba.njit(cache=True)
 def _nearest_distance(px, py, ax, ay, ex, ey):
     """``(qx, qy, dist)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p``
-    (as ``intervals.sonar._nearest_on_segment``)."""
+    (as ``intervals.sonar.geometry.nearest_on_segment``)."""
     ee = ex * ex + ey * ey
     t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
     if t < 0.0:
@@ -81,7 +82,7 @@ def _nearest_distance(px, py, ax, ay, ex, ey):
 @numba.njit(cache=True)
 def _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m):
     """Lower bound of the distance between the segment ``a + t e`` and the box ``(c, h)`` (as
-    ``intervals.sonar._segment_box_gap``, which states why it is a bound)."""
+    ``intervals.sonar.geometry.segment_box_gap``, which states why it is a bound)."""
     qx, qy, dist = _nearest_distance(cx, cy, ax, ay, ex, ey)
     if dist >= near_switch_m:
         return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy)
@@ -98,7 +99,7 @@ def _point_box_farthest(px, py, cx, cy, hx, hy):
 def _clip(ax, ay, ex, ey, planes, first):
     """Parameter range ``(t_lo, t_hi)`` of ``a + t e``, t in [0, 1], in the two half-planes
     ``nx qx + ny qy >= c`` stored as ``planes[first:first + 6] = (nx, ny, c, nx, ny, c)``;
-    empty where ``t_lo > t_hi`` (as ``intervals.sonar._clip_segment``)."""
+    empty where ``t_lo > t_hi`` (as ``intervals.sonar.geometry.clip_segment``)."""
     t_lo, t_hi = 0.0, 1.0
     for h in range(first, first + 6, 3):
         nx, ny, c = planes[h], planes[h + 1], planes[h + 2]
@@ -116,7 +117,7 @@ def _clip(ax, ay, ex, ey, planes, first):
 @numba.njit(cache=True)
 def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
     """Whether the arc from ``u_a`` counter-clockwise to ``u_b`` holds the axis direction
-    ``e`` (as ``intervals.sonar._arc_reaches``, slack towards "reached")."""
+    ``e`` (as ``intervals.sonar.geometry.arc_reaches``, slack towards "reached")."""
     det_a = ux_a * ey - uy_a * ex
     det_b = ex * uy_b - ey * ux_b
     if half_turn:
@@ -127,7 +128,7 @@ def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
 @numba.njit(cache=True)
 def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
     """One wedge-edge half-plane ``(nx, ny, c)`` into ``out[at:at + 3]`` (as one turn of
-    ``intervals.sonar._wedge_constraints``)."""
+    ``intervals.sonar.geometry.wedge_constraints``)."""
     nx, ny = -flip * uy, flip * ux
     spread = abs(nx) * hx + abs(ny) * hy
     out[at] = nx
@@ -151,7 +152,7 @@ def _sensor_rows(
 ):
     """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
-    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar._sensor_boxes``); returns ``sure``
+    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.cone._sensor_boxes``); returns ``sure``
     (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
     theta_lo, theta_hi = box[2, 0], box[2, 1]
     width = theta_hi - theta_lo
@@ -202,11 +203,97 @@ def _sensor_rows(
 
 
 @numba.njit(cache=True)
+def _segment_verdicts(
+    ax,
+    ay,
+    ex,
+    ey,
+    rows,
+    ranges,
+    kind,
+    sure,
+    inner,
+    guard_m,
+    near_switch_m,
+    hit,
+    fires,
+    close,
+    sure_hit,
+    done,
+):
+    """The hit and free-space tests (and the inner acceptance's parts) of one pose box against
+    the segment ``a + t e``, every sensor not ``done``: sets ``hit``, ``fires``, ``close`` and
+    ``sure_hit`` ``(k,)`` where this segment makes them true (never resets them), so the
+    verdicts do not depend on the order in which the segments come. Marks ``done`` the sensors
+    whose verdict no further segment can change (:func:`_decided`); returns how many."""
+    k = rows.shape[0]
+    decided = 0
+    for i in range(k):
+        if done[i]:
+            continue
+        # the part [t0, t1] of the segment in S + W(Phi)
+        t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
+        if not t0 <= t1:
+            continue
+        cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
+        lo, hi = ranges[i, 0], ranges[i, 1]
+        # hit test: distance bounds between that part and the sensor box
+        p0x, p0y = ax + t0 * ex, ay + t0 * ey
+        dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
+        dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
+        dist_ub = (
+            _max(
+                _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+                _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+            )
+            + guard_m
+        )
+        if dist_lb <= hi and dist_ub >= lo:
+            hit[i] = True
+        if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
+            close[i] = True  # some pose may see this segment closer than lo
+        # free-space test: segment points in the cone for every pose of the box
+        if sure:
+            u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
+            if u0 <= u1:
+                far_bound = (
+                    _nearest_distance(
+                        cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
+                    )[2]
+                    + math.hypot(hx, hy)
+                    + guard_m
+                )
+                if far_bound < lo:
+                    fires[i] = True
+                if far_bound <= hi:
+                    sure_hit[i] = True
+        if _decided(hit[i], fires[i], sure, inner):
+            done[i] = True
+            decided += 1
+    return decided
+
+
+@numba.njit(cache=True)
+def _decided(hit, fires, sure, inner):
+    """Whether a sensor's verdicts are final for the box whatever segments come next: the free
+    space test fired (rejected), or some segment passes the hit test when neither the free
+    space test (``sure`` false: it cannot fire) nor the inner acceptance (``inner`` false) is
+    evaluated (``hit``, ``fires`` and the final formulas only ever turn towards these)."""
+    return fires or (hit and not sure and not inner)
+
+
+@numba.njit(cache=True)
 def sensor_verdicts_into(
     boxes,
     cos_theta,
     sin_theta,
     segments,
+    allowed,
+    grid_origin,
+    grid_cell_m,
+    grid_shape,
+    grid_starts,
+    grid_members,
     ranges,
     kind,
     reach_m,
@@ -222,14 +309,18 @@ def sensor_verdicts_into(
     reject,
     certain,
 ):
-    """Per box and sensor verdicts of :func:`intervals.sonar.sensor_verdicts`, in place.
+    """Per box and sensor verdicts of :func:`intervals.sonar.cone.sensor_verdicts`, in place.
 
     ``boxes (N, 3, 2)`` and ``cos_theta, sin_theta (N, 2)`` of their heading bounds (numpy's
-    ``cos`` and ``sin``, those of the reference); ``segments (m, 2, 2)``; ``ranges (k, 2)``
-    distance intervals m and ``kind (k,)`` int8 of the readings (:func:`intervals.sonar.reading_intervals`); ``reach_m``
-    (:attr:`intervals.sonar.SonarScan.reach_m`); ``belt (k, 8)``
-    (:attr:`intervals.sonar.SonarBelt.kernel_table`); the aperture, the sensor-box margin m and
-    the tolerances of :mod:`intervals.sonar`; ``inner``: compute ``certain``.
+    ``cos`` and ``sin``, those of the reference); ``segments (M, 2, 2)`` (the scene's) of which
+    only those with ``allowed (M,)`` take part, and their grid
+    (:class:`intervals.sonar.segment_grid.SegmentGrid`: ``grid_origin (2,)``, ``grid_cell_m``,
+    ``grid_shape (2,)`` int64, ``grid_starts``, ``grid_members``); ``ranges (k, 2)`` distance
+    intervals m and ``kind (k,)`` int8 of the readings
+    (:func:`intervals.sonar.scan.reading_intervals`); ``reach_m``
+    (:attr:`intervals.sonar.scan.SonarScan.reach_m`); ``belt (k, 8)``
+    (:attr:`intervals.sonar.scan.SonarBelt.kernel_table`); the aperture, the sensor-box margin
+    m and the tolerances of :mod:`intervals.sonar.geometry`; ``inner``: compute ``certain``.
     Writes ``reject (N, k)`` and ``certain (N, k)`` (bool, every element).
     """
     k = belt.shape[0]
@@ -238,7 +329,10 @@ def sensor_verdicts_into(
     fires = np.empty(k, dtype=np.bool_)  # the free-space test fires
     close = np.empty(k, dtype=np.bool_)  # some segment may be closer than lo
     sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
+    done = np.empty(k, dtype=np.bool_)  # the sensor's verdicts are final for this box
     visible = reach_m + guard_m
+    nx, ny = grid_shape[0], grid_shape[1]
+    seen = np.zeros(segments.shape[0], dtype=np.int64)  # box number + 1 of the last visit
     for n in range(boxes.shape[0]):
         sure = _sensor_rows(
             boxes[n],
@@ -267,55 +361,56 @@ def sensor_verdicts_into(
         fires[:] = False
         close[:] = False
         sure_hit[:] = False
-        for j in range(segments.shape[0]):
-            ax, ay = segments[j, 0, 0], segments[j, 0, 1]
-            ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-            gap = _segment_box_gap(
-                ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
-            )
-            if not gap <= visible:
-                continue
-            for i in range(k):
-                if kind[i] == IGNORED:
-                    continue
-                # the part [t0, t1] of the segment in S + W(Phi)
-                t0, t1 = _clip(ax, ay, ex, ey, rows[i], UNION)
-                if not t0 <= t1:
-                    continue
-                cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
-                lo, hi = ranges[i, 0], ranges[i, 1]
-                # hit test: distance bounds between that part and the sensor box
-                p0x, p0y = ax + t0 * ex, ay + t0 * ey
-                dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-                dist_lb = (
-                    _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
-                )
-                dist_ub = (
-                    _max(
-                        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+        # sensors decided before any segment: ignored ones, and free-space readings when the
+        # free-space test cannot fire (their verdict is "not rejected", certain unused)
+        remaining = 0
+        for i in range(k):
+            done[i] = kind[i] == IGNORED or (kind[i] == FREE and not sure and not inner)
+            remaining += 0 if done[i] else 1
+        # the segments registered near the hull (intervals.sonar.segment_grid: every segment
+        # the gap test below keeps is among them), each once (stamped with the box number)
+        radius = visible + math.hypot(hull_hx, hull_hy)
+        ix0 = max(math.floor((hull_cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
+        ix1 = min(math.floor((hull_cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
+        iy0 = max(math.floor((hull_cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
+        iy1 = min(math.floor((hull_cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+        for ix in range(ix0, ix1 + 1):
+            if remaining == 0:
+                break  # every verdict is final: the other segments cannot change it
+            for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
+                if remaining == 0:
+                    break
+                for member in range(grid_starts[cell], grid_starts[cell + 1]):
+                    if remaining == 0:
+                        break
+                    j = grid_members[member]
+                    if seen[j] == n + 1 or not allowed[j]:
+                        continue
+                    seen[j] = n + 1
+                    ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+                    ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
+                    gap = _segment_box_gap(
+                        ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
                     )
-                    + guard_m
-                )
-                if dist_lb <= hi and dist_ub >= lo:
-                    hit[i] = True
-                if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
-                    close[i] = True  # some pose may see this segment closer than lo
-                # free-space test: segment points in the cone for every pose of the box
-                if sure:
-                    u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
-                    if u0 <= u1:
-                        far_bound = (
-                            _nearest_distance(
-                                cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-                            )[2]
-                            + math.hypot(hx, hy)
-                            + guard_m
+                    if gap <= visible:
+                        remaining -= _segment_verdicts(
+                            ax,
+                            ay,
+                            ex,
+                            ey,
+                            rows,
+                            ranges,
+                            kind,
+                            sure,
+                            inner,
+                            guard_m,
+                            near_switch_m,
+                            hit,
+                            fires,
+                            close,
+                            sure_hit,
+                            done,
                         )
-                        if far_bound < lo:
-                            fires[i] = True
-                        if far_bound <= hi:
-                            sure_hit[i] = True
         for i in range(k):
             echo, free = kind[i] == ECHO, kind[i] == FREE
             impossible = echo and ranges[i, 0] > ranges[i, 1]
@@ -329,7 +424,7 @@ def sensor_verdicts_into(
 
 @numba.njit(cache=True)
 def room_verdicts_into(boxes, boundary, guard_m, near_switch_m, outside, inside):
-    """The in-room test of :mod:`intervals.sonar` (as ``intervals.sonar._room_verdict``), in
+    """The in-room test of :mod:`intervals.sonar.room` (as ``intervals.sonar.room.room_verdicts``), in
     place: ``outside (N,)`` / ``inside (N,)`` bool, the (x, y) rectangle of box ``n`` lies
     entirely outside / inside the polygon ``boundary (p, 2)`` m: no edge comes within
     ``guard_m`` of it, and the ray cast from its centre towards +x crosses the boundary an even

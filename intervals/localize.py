@@ -1,0 +1,309 @@
+r"""Localisation from a sonar scan: paving by SIVIA, q-relaxation and GOMNE (paper 002 s. 3).
+
+The box tests (:mod:`intervals.sonar.cone`, :mod:`intervals.sonar.room`,
+:mod:`intervals.sonar.rays`) give, per box, which sensors' readings no pose of the box can
+explain. Here they are combined:
+
+* **q-relaxation**: a box is OUTSIDE when the in-room test rejects it or more than ``q`` sensors
+  reject it; INSIDE (if inner tests are on) when it is inside the room and at most ``q``
+  sensors are not certainly satisfied; else UNDECIDED (:func:`box_test`).
+* :func:`localize` paves ``{p in initial : at most q sensors inconsistent}`` with SIVIA;
+  :func:`gomne` raises ``q`` from 0 to the smallest value leaving a non-empty set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from intervals.boxes import (
+    DEFAULT_HEADING_SCALE_M_PER_RAD,
+    Subpaving,
+    as_boxes,
+    max_width,
+    pose_scale,
+)
+from intervals.errors import IntervalError
+from intervals.imagesp import coarsen
+from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, sivia
+from intervals.sonar import rays
+from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.room import room_verdicts
+from intervals.sonar.scan import SonarBelt, SonarScan
+
+MIN_LEVEL_BOXES = 128
+"""SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
+
+TESTS_PER_BOX = 20
+"""With a budget of ``max_boxes``, SIVIA may test at most this many times ``max_boxes`` boxes in
+one pass (:func:`localize`): about 1.5 s of the compiled test at 8 us a box for the tracker's
+default 10 000, above the 190 000 boxes a global search of a 30 x 30 m, 184-segment map
+tests."""
+
+RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD = 0.1
+"""With ``ray_test=None`` (auto), :mod:`intervals.sonar.rays` joins the box test when the belt's
+half-aperture is at most this. Measured (``benchmarks/intervals_vs_codac.py``, tracking epochs
+in ``hall``): the outer volume with the ray test over the volume without is 0.37-0.74 for
+half-apertures of 0.003-0.1 rad but 0.90 for the default belt's 12.5 deg (0.22 rad), where it
+costs about 5 ms an epoch (more than the rest of the epoch): worth it on thin cones, a choice
+(``ray_test=True``) on wide ones."""
+
+
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, engine: str):
+    """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
+    of sensors rejecting each box, and which."""
+    reject, certain = sensor_verdicts(boxes, scan, inner, engine)
+    rejects = np.count_nonzero(reject, axis=1)
+    out = rejects > q
+    inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
+    if scan.boundary is not None:
+        # the in-room test only matters for the boxes the sensors do not reject
+        live = np.flatnonzero(~out)
+        room_out, room_in = room_verdicts(boxes[live], scan.boundary, engine)
+        out[live] |= room_out
+        inside[live] &= room_in
+    verdicts = np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
+    return verdicts, rejects, reject
+
+
+def box_test(
+    boxes, scan: SonarScan, q: int = 0, inner: bool = True, engine: str = "compiled"
+) -> np.ndarray:
+    """SIVIA test ``(N,) int8``: OUTSIDE when the in-room test or more than ``q`` sensors reject
+    the box, INSIDE when (``inner``) it is inside the room and at most ``q`` sensors are not
+    certainly satisfied, else UNDECIDED. ``engine``: see :func:`intervals.sonar.cone.sensor_verdicts`."""
+    return _test_and_counts(as_boxes(boxes), scan, q, inner, engine)[0]
+
+
+def _checked_q(q) -> None:
+    if not (isinstance(q, (int, np.integer)) and q >= 0):
+        raise IntervalError(f"q must be a non-negative integer, got {q!r}")
+
+
+def _checked_budget(max_boxes) -> None:
+    if max_boxes is not None and not (isinstance(max_boxes, (int, np.integer)) and max_boxes >= 8):
+        raise IntervalError(f"max_boxes must be None or an integer >= 8, got {max_boxes!r}")
+
+
+def _initial_poses(initial) -> np.ndarray:
+    boxes = as_boxes(initial, "initial pose boxes")
+    if boxes.shape[1] != 3:
+        raise IntervalError(f"initial pose boxes must be (N, 3, 2), got {boxes.shape}")
+    return boxes
+
+
+def _uses_ray_test(ray_test: bool | None, belt: SonarBelt) -> bool:
+    """Whether the ray test joins the box test (``None``: by the belt's aperture, see
+    :data:`RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
+    if ray_test is None:
+        return belt.half_aperture_rad <= RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD
+    if not isinstance(ray_test, bool):
+        raise IntervalError(f"ray_test must be True, False or None (auto), got {ray_test!r}")
+    return ray_test
+
+
+def _pave(
+    local: SonarScan, boxes, eps, q, scale, inner, splits_per_level, engine, ray_test, max_boxes
+):
+    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,))`` with the number of
+    sensors rejecting each boundary box, kept from the SIVIA level that stored the box (the
+    boundary boxes are the undecided boxes no wider than ``eps``, in the order SIVIA met
+    them; checked, and recomputed if SIVIA ever stored them otherwise).
+
+    ``max_boxes`` (None: no budget): the budget of :func:`localize`. SIVIA may then test at
+    most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes and hand at most ``max_boxes`` to one
+    test call; a set of more than ``max_boxes`` boxes is merged into at most that many
+    (:func:`intervals.imagesp.coarsen`). A set cut short or merged is ``coarse``; its boxes are
+    tested once more and those the test rejects are dropped (each rejection is sound for
+    every pose of the box), the counts recomputed on the boxes kept.
+
+    With ``ray_test`` the boxes SIVIA would store are also tested by
+    :func:`intervals.sonar.rays.joint_rejection_counts` (pieces of the box, each rejected by the
+    ray test or the cone test of its sensors): a box whose every piece is rejected by more
+    than ``q`` sensors holds no pose with at most ``q`` bad readings, so it is OUTSIDE. Its
+    count is never below the cone test's, so GOMNE's ``count <= q`` sets stay sound. Only the
+    stored boxes are tested: rejecting those is all that changes the outer set (testing every
+    level gave the same volumes at twice the time).
+    """
+    stored, counts = [], []
+
+    def recount(b, reject):
+        return rays.joint_rejection_counts(
+            b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
+        )
+
+    def test(b):
+        verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
+        keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
+        if ray_test and (idx := np.flatnonzero(keep)).size:
+            rejects[idx] = recount(b[idx], reject[idx])
+            out = idx[rejects[idx] > q]
+            verdicts[out] = OUTSIDE
+            keep[out] = False
+        stored.append(b[keep])
+        counts.append(rejects[keep])
+        return verdicts
+
+    paving = sivia(
+        test,
+        boxes,
+        eps,
+        scale,
+        max_boxes=DEFAULT_MAX_BOXES if max_boxes is None else min(max_boxes, DEFAULT_MAX_BOXES),
+        splits_per_level=splits_per_level,
+        min_level_boxes=MIN_LEVEL_BOXES,
+        max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
+    )
+    if max_boxes is not None and paving.outer.shape[0] > max_boxes:
+        merged = coarsen(paving.outer, max_boxes, scale)
+        paving = Subpaving(np.zeros((0, 3, 2)), merged, coarse=True)
+    if paving.coarse:  # boxes kept whole or merged: test them once more, drop the rejected
+        verdicts, rejects, reject = _test_and_counts(paving.boundary, local, q, False, engine)
+        if ray_test:
+            rejects = recount(paving.boundary, reject)
+        keep = (verdicts != OUTSIDE) & (rejects <= q)
+        return Subpaving(paving.inner, paving.boundary[keep], coarse=True), rejects[keep]
+    rejects = np.concatenate(counts)
+    if not np.array_equal(np.concatenate(stored), paving.boundary):
+        reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
+        rejects = recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
+    return paving, rejects
+
+
+def localize(
+    scan: SonarScan,
+    initial,
+    eps: float,
+    q: int = 0,
+    heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
+    inner: bool = False,
+    splits_per_level: int = 3,
+    engine: str = "compiled",
+    ray_test: bool | None = None,
+    max_boxes: int | None = None,
+) -> Subpaving:
+    """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
+
+    ``initial``: a pose box ``(3, 2)`` or a subpaving ``(N, 3, 2)``. Only the segments within
+    reach of the initial boxes take part. Levels of fewer than :data:`MIN_LEVEL_BOXES` boxes
+    are bisected further before the test (see :func:`intervals.sivia.sivia`).
+    ``inner=False`` (default) skips the inner acceptance
+    test: the outer approximation is what the fusion uses, and it is cheaper.
+    ``engine``: the implementation of the box test (see :func:`intervals.sonar.cone.sensor_verdicts`).
+    ``ray_test``: add :mod:`intervals.sonar.rays` to the test of the boxes kept (``None``: when the
+    cones are thin, :data:`RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
+    ``max_boxes``: a budget (None: none). The set then holds at most ``max_boxes`` boxes and
+    SIVIA tests at most :data:`TESTS_PER_BOX` ``* max_boxes``, at most ``max_boxes`` per
+    call, so time and memory are bounded whatever the map, the readings or ``eps``; where the
+    budget cuts the paving short or merges its boxes the set is a coarser cover of the same
+    poses, marked ``coarse`` (:attr:`intervals.boxes.Subpaving.coarse`).
+    """
+    _checked_q(q)
+    _checked_budget(max_boxes)
+    boxes = _initial_poses(initial)
+    scale = pose_scale(heading_scale_m_per_rad)
+    local = scan.restricted_to(boxes)
+    return _pave(
+        local,
+        boxes,
+        eps,
+        q,
+        scale,
+        inner,
+        splits_per_level,
+        engine,
+        _uses_ray_test(ray_test, scan.belt),
+        max_boxes,
+    )[0]
+
+
+@dataclass(frozen=True)
+class GomneResult:
+    """Outcome of :func:`gomne`.
+
+    ``q``: GOMNE's estimate, the smallest number of outliers that leaves a non-empty set (None
+    when even ``q_max`` leaves it empty: the data are inconsistent); ``q_set``: the relaxation
+    of the returned ``paving`` (``q_max`` when guaranteed, else ``q``).
+    """
+
+    paving: Subpaving
+    q: int | None
+    q_set: int | None
+
+    @property
+    def consistent(self) -> bool:
+        """False when no ``q <= q_max`` explains the data (never clamp to this set)."""
+        return self.q is not None
+
+
+def gomne(
+    scan: SonarScan,
+    initial,
+    eps: float,
+    q_max: int,
+    heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
+    inner: bool = False,
+    guaranteed: bool = True,
+    engine: str = "compiled",
+    ray_test: bool | None = None,
+    max_boxes: int | None = None,
+) -> GomneResult:
+    """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
+
+    The sets are nested (``S_0 ⊆ S_1 ⊆ ... ⊆ S_qmax``), so ``S_qmax`` is paved first (empty:
+    inconsistent, stop); without inner boxes ``S_q`` is read off the number of sensors rejecting
+    each of its boxes, recorded during that pass; with them ``q = 0, 1, ...`` are tried on its
+    boxes (a SIVIA pass each).
+
+    ``guaranteed=True`` returns ``S_qmax``: it holds the true pose whenever at most ``q_max``
+    readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
+    miss the truth: outliers that happen to agree with some other pose make fewer than the
+    actual number of outliers suffice, and ``S_q`` then holds only those other poses.
+    ``engine``, ``ray_test`` and ``max_boxes``: as in :func:`localize` (a coarse ``S_qmax``
+    gives a coarse ``S_q``).
+    """
+    if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
+        raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
+    _checked_budget(max_boxes)
+    boxes = _initial_poses(initial)
+    scale = pose_scale(heading_scale_m_per_rad)
+    local = scan.restricted_to(boxes)
+    widest, rejects = _pave(
+        local,
+        boxes,
+        eps,
+        q_max,
+        scale,
+        inner,
+        3,
+        engine,
+        _uses_ray_test(ray_test, scan.belt),
+        max_boxes,
+    )
+    if widest.is_empty:
+        return GomneResult(widest, None, None)
+    if inner:
+        for q in range(q_max):
+            minimal = localize(
+                scan,
+                widest.outer,
+                eps,
+                q,
+                heading_scale_m_per_rad,
+                inner,
+                engine=engine,
+                ray_test=ray_test,
+                max_boxes=max_boxes,
+            )
+            if not minimal.is_empty:
+                break
+        else:
+            q, minimal = q_max, widest
+    else:
+        # Every box of S_qmax is then a boundary box no wider than eps that passed the
+        # in-room test: SIVIA at q < q_max on them would keep exactly those rejected by at most
+        # q sensors, so the reject counts of the q_max pass give every S_q without a new pass.
+        q = int(min(rejects.min(), q_max))
+        minimal = Subpaving(widest.inner, widest.boundary[rejects <= q], coarse=widest.coarse)
+    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q)

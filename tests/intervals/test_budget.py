@@ -1,0 +1,161 @@
+"""The budget (``max_boxes``): a paving that would exceed it stays under it, is reported
+coarse, and keeps every consistent pose (checked against poses sampled and tested with the
+simulator's exact cone model, independent of the interval tests)."""
+
+import numpy as np
+import pytest
+
+from intervals import localize as localize_module
+from intervals.imagesp import coarsen
+from intervals.localize import TESTS_PER_BOX, gomne
+from intervals.sonar.scan import ECHO, FREE, SonarBelt, SonarScan
+from intervals.tracker import IntervalTracker, TrackerSettings
+from robotsim.maps import builtin_map
+from tests.helpers import (
+    DEFAULT_BELT,
+    bounded_readings,
+    circuit_poses,
+    cone_ranges,
+    random_room,
+    random_scan_case,
+)
+
+
+def _consistent_poses(scan: SonarScan, segments, centre, half, q, rng, count=1500):
+    """Poses of the box ``centre -+ half`` that leave at most ``q`` readings unexplained by the
+    exact cone model (``robotsim.sensors.sonar.cone_distances``), sampled uniformly."""
+    poses = rng.uniform(centre - half, centre + half, size=(count, 3))
+    poses[:, 2] = np.mod(poses[:, 2] + np.pi, 2 * np.pi) - np.pi  # headings as the sets hold them
+    d = cone_ranges(poses, segments)  # (count, k)
+    lo, hi = scan.ranges[:, 0], scan.ranges[:, 1]
+    echo_bad = (scan.kind == ECHO) & ~((d >= lo) & (d <= hi))
+    free_bad = (scan.kind == FREE) & ~(d > scan.belt.d_max_m)
+    return poses[np.count_nonzero(echo_bad | free_bad, axis=1) <= q]
+
+
+class _CountingTest:
+    """Wraps ``intervals.localize.sensor_verdicts`` to record the boxes of each call."""
+
+    def __init__(self, monkeypatch):
+        self.calls: list[int] = []
+        real = localize_module.sensor_verdicts
+
+        def counted(boxes, *args, **kwargs):
+            self.calls.append(len(boxes))
+            return real(boxes, *args, **kwargs)
+
+        monkeypatch.setattr(localize_module, "sensor_verdicts", counted)
+
+
+@pytest.mark.parametrize("echoes_never_lost", [True, False])
+def test_a_global_search_over_budget_stays_under_it_and_keeps_the_consistent_poses(
+    monkeypatch, echoes_never_lost
+):
+    """30 random rooms, poses and bounded noise (often at the bounds), a global search at
+    eps 0.05 m with q_max 1 under budgets of 16 to 400 boxes (an unbudgeted search tests
+    thousands): the set holds at most ``max_boxes`` boxes, no test call sees more, at most
+    ``TESTS_PER_BOX * max_boxes`` boxes are tested in all (plus the final retest), the set is
+    coarse, and every consistent pose sampled near the truth, the truth included, is in it."""
+    rng = np.random.default_rng(21 if echoes_never_lost else 22)
+    belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=echoes_never_lost)
+    counting = _CountingTest(monkeypatch)
+    checked, coarse = 0, 0
+    for trial in range(30):
+        segments, outer = random_room(rng)
+        truth = np.array([*rng.uniform(1.0, 9.0, size=2), rng.uniform(-np.pi, np.pi)])
+        readings = bounded_readings(cone_ranges(truth[None], segments)[0], DEFAULT_BELT, rng)
+        scan = SonarScan(segments, belt, readings, outer)
+        max_boxes = int((16, 50, 400)[trial % 3])
+        counting.calls.clear()
+        result = gomne(
+            scan, np.array([[0, 10], [0, 10], [-np.pi, np.pi]]), 0.05, 1, max_boxes=max_boxes
+        )
+        assert result.consistent  # the truth leaves no reading unexplained
+        paving = result.paving
+        assert paving.outer.shape[0] <= max_boxes
+        assert max(counting.calls) <= max_boxes
+        assert sum(counting.calls[:-1]) <= TESTS_PER_BOX * max_boxes
+        coarse += paving.coarse
+        poses = _consistent_poses(scan, segments, truth, np.array([0.1, 0.1, 0.05]), 1, rng)
+        poses = np.concatenate([truth[None], poses])
+        assert paving.contains(poses).all()
+        checked += len(poses)
+    assert coarse >= 20 and checked > 30 * 20  # the budget bit, and the check is not vacuous
+
+
+def test_tracker_over_budget_reports_coarse_epochs_and_keeps_the_truth():
+    """The hall circuit with half the echoes lost (no free space then; unbudgeted, these sets
+    reach millions of boxes and a minute an epoch) under budgets of 24 and 200 boxes: every
+    epoch keeps the truth within the budget and coarse epochs are reported; with every echo
+    kept and a budget of 100 000 boxes no epoch is coarse (the flag is not raised for
+    nothing; the default 10 000 cuts one of these epochs, which tests 204 000 boxes)."""
+    hall = builtin_map("hall")
+    rng = np.random.default_rng(9)
+    poses = circuit_poses(20)
+    cases = []
+    for lost in (0.5, 0.0):
+        belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=lost == 0.0)
+        scans = []
+        for truth in poses:
+            m = bounded_readings(cone_ranges(truth[None], hall.segments)[0], DEFAULT_BELT, rng)
+            m[rng.random(m.shape) < lost] = np.inf  # lost echoes
+            scans.append(SonarScan(hall.segments, belt, m, hall.boundary))
+        budgets = (24, 200) if lost else (100_000,)
+        cases.extend((scans, max_boxes, lost > 0) for max_boxes in budgets)
+    for kind in ("sivia", "imagesp"):
+        for scans, max_boxes, expect_coarse in cases:
+            settings = TrackerSettings(
+                v_max_m_s=0.5, omega_max_rad_s=0.5, tracker=kind, max_boxes=max_boxes
+            )
+            tracker, previous, coarse = IntervalTracker(settings, hall.bounds), None, 0
+            for truth, scan in zip(poses, scans, strict=True):
+                result = tracker.step(previous, scan, 1.0)
+                assert result.consistent and result.paving.contains(truth[None])[0]
+                assert result.outer.shape[0] <= max_boxes
+                assert result.coarse == result.paving.coarse
+                coarse += result.coarse
+                previous = result.paving
+            assert (coarse > 0) == expect_coarse
+
+
+def test_coarsen_covers_with_fewer_disjoint_boxes():
+    """Random box sets merged into at most M boxes: points of the input boxes are covered, the
+    cells do not overlap, and a set already small enough is returned as it is."""
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        n = int(rng.integers(2, 3000))
+        lo = rng.uniform(-5, 5, size=(n, 3))
+        boxes = np.stack([lo, lo + rng.uniform(0, 0.2, size=(n, 3))], axis=-1)
+        limit = int(rng.integers(1, 500))
+        merged = coarsen(boxes, limit, np.array([1.0, 1.0, 2.0]))
+        assert merged.shape[0] <= max(limit, 1)
+        points = rng.uniform(boxes[..., 0], boxes[..., 1])
+        inside = np.all(
+            (merged[None, :, :, 0] <= points[:, None]) & (points[:, None] <= merged[None, :, :, 1]),
+            axis=-1,
+        )
+        assert inside.any(axis=1).all()
+        if merged.shape[0] > 1:  # regular cells: interiors disjoint
+            centre = (merged[..., 0] + merged[..., 1]) / 2
+            holding = np.all(
+                (merged[None, :, :, 0] < centre[:, None])
+                & (centre[:, None] < merged[None, :, :, 1]),
+                axis=-1,
+            )
+            assert (holding.sum(axis=1) == 1).all()
+    few = rng.uniform(0, 1, size=(5, 3, 2))
+    assert coarsen(few, 5) is few
+
+
+def test_budget_with_the_ray_test_keeps_the_truth():
+    """Thin cones (the ray test joins the cone test) under budgets of 16 and 100 boxes: the
+    coarse sets, retested with both tests, hold the truth and stay under the budget."""
+    rng = np.random.default_rng(13)
+    for trial in range(16):
+        scan, _, truth = random_scan_case(rng, 0.02, echoes_never_lost=trial % 2 == 0)
+        half = np.array([0.8, 0.8, 0.4])
+        prior = np.stack([truth - half, truth + half], axis=-1)
+        max_boxes = (16, 100)[trial % 2]
+        result = gomne(scan, prior, 0.02, 1, ray_test=True, max_boxes=max_boxes)
+        assert result.consistent and result.paving.contains(truth[None])[0]
+        assert result.paving.outer.shape[0] <= max_boxes
