@@ -3,7 +3,7 @@
 Paper 002 section 3: the pose set is first found globally (whole map, any heading); at each
 later scan the previous set is predicted *by the robot's physical limits* (it can have moved
 at most ``v_max dt`` and turned at most ``omega_max dt``) and contracted by the sonar tests.
-Two predictions are offered (MODELS.md section 4):
+Two predictions are offered (docs/models.md section 4):
 
 * ``"sivia"``: the hull of the previous outer boxes, inflated by the limits, inverted as one
   box;

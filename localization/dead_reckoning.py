@@ -70,7 +70,7 @@ ticks counts the turn from ``k - 1`` to ``k``):
 Noise: encoder quantisation gives each wheel's increment an error that is the difference of
 two uniform tick fractions, standard deviation ``1 / sqrt(6)`` tick (treated as white: it is
 in fact anti-correlated, so the filter is conservative about it); the IMU white noise has the
-per-sample standard deviation ``density * sqrt(rate_hz)`` (MODELS.md section 2).
+per-sample standard deviation ``density * sqrt(rate_hz)`` (docs/models.md section 2).
 
 Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step, take
 190-380 us a step for the batch of two branches (``ekf`` .. ``iukf``; 16 s for 600 s of ``ukf``

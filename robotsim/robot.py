@@ -1,4 +1,4 @@
-"""The differential-drive robot: its parameters and kinematics (MODELS.md section 2).
+"""The differential-drive robot: its parameters and kinematics (docs/models.md section 2).
 
 Wheel rates ``w_l, w_r`` (rad/s), radii ``r_l, r_r`` (m), wheel base ``L`` (m):
 

@@ -14,7 +14,7 @@ at a sample needs the next one), a 10 ms latency at 100 Hz.
 
 Commands: the controller asks for a body velocity; the robot's software turns it into
 wheel rates with the NOMINAL radius, and the wheels move the body with the TRUE radii
-(MODELS.md section 2). The resulting true velocity target is clamped to the robot's
+(docs/models.md section 2). The resulting true velocity target is clamped to the robot's
 limits (``v_max``, ``omega_max``, ``a_max``) and handed to the world.
 """
 

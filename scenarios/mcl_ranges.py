@@ -1,7 +1,7 @@
 """What the particle filter (:mod:`localization.mcl`) needs to know of the map and the belt.
 
 - :func:`cone_range_function`: the expected sonar ranges of particle poses, the simulator's
-  exact cone model (:func:`robotsim.sensors.sonar.cone_distances`, MODELS.md section 3)
+  exact cone model (:func:`robotsim.sensors.sonar.cone_distances`, docs/models.md section 3)
   compiled with numba: the same candidates (the segment's end points and the foot of the
   perpendicular inside the cone, the cone's edge rays meeting the segment), the same slack
   and the same arithmetic, so without noise it gives what the simulator's sonar reads

@@ -129,6 +129,7 @@ TRACKER_KEYS = (
     "heading_scale_m_per_rad",
     "imagesp_pitch_m",
     "ray_test",
+    "max_boxes",
 )
 
 

@@ -1,5 +1,5 @@
-r"""The cone test: sound per-sensor verdicts of the sonar cone model on pose boxes (MODELS.md
-sections 3-4, paper 002 s. 3). The model and the reading intervals: :mod:`intervals.sonar.scan`.
+r"""The cone test: sound per-sensor verdicts of the sonar cone model on pose boxes
+(docs/models.md sections 3-4, paper 002 s. 3). The model and the reading intervals: :mod:`intervals.sonar.scan`.
 
 Tests on a pose box ``[p] = [x] x [y] x [theta]`` for sensor ``i`` with ``[d_i] = [lo, hi]``.
 Write ``S`` for a box enclosing ``{s_i(p) : p in [p]}``: ``[x] + |m_i| [c]`` etc., where

@@ -1,6 +1,6 @@
 """Gyro (yaw rate) and two-axis accelerometer (body x, y) with bias and white noise.
 
-Each axis measures ``truth + b(t) + n`` (MODELS.md section 2):
+Each axis measures ``truth + b(t) + n`` (docs/models.md section 2):
 - ``n`` white, per-sample standard deviation ``noise_density * sqrt(rate_hz)``;
 - ``b(t) = b0 + w(t)``: a turn-on bias ``b0 ~ N(0, turn_on_bias_std^2)`` drawn once per run
   and a random walk ``w``, ``w(0) = 0``, increments ``N(0, bias_random_walk^2 / rate_hz)``,

@@ -1,6 +1,6 @@
 """The sonar belt: the exact cone distance model and simulated readings with bounded errors.
 
-Model (MODELS.md section 3; paper 002 fig. 3 after Kieffer et al. 2000). Sensor i sits at
+Model (docs/models.md section 3; paper 002 fig. 3 after Kieffer et al. 2000). Sensor i sits at
 ``s~_i`` in the robot frame and points along ``theta~_i``; in the world
 ``s_i = (x, y) + R(theta) s~_i`` and its cone holds the directions
 ``[theta + theta~_i - gamma, theta + theta~_i + gamma]``. The modelled distance is

@@ -1,4 +1,4 @@
-"""The pipeline's guarantee (paper 002, MODELS.md sections 4-5), on short real runs.
+"""The pipeline's guarantee (paper 002, docs/models.md sections 4-5), on short real runs.
 
 - errors inside their bounds and at most ``q_max`` outliers per scan: the outer set holds the
   true pose at every epoch, no epoch is inconsistent, and the fused position lies in the box

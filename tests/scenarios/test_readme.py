@@ -162,13 +162,14 @@ def test_every_paper_the_code_cites_is_named_in_the_references():
 
 
 def test_every_models_section_the_code_cites_exists():
-    sections = {int(n) for n in re.findall(r"MODELS\.md sections? (\d)", _code_text())}
-    sections |= {int(b) for a, b in re.findall(r"MODELS\.md sections (\d)-(\d)", _code_text())}
+    text = _code_text()
+    sections = {int(n) for n in re.findall(r"docs/models\.md sections? (\d)", text)}
+    sections |= {int(b) for _, b in re.findall(r"docs/models\.md sections (\d)-(\d)", text)}
     assert sections
     models = (ROOT / "docs" / "models.md").read_text(encoding="utf-8")
     for n in sorted(sections):
         assert re.search(rf"^## {n}\. ", models, re.M), (
-            f"MODELS.md section {n} is not in docs/models.md"
+            f"docs/models.md section {n} is not in docs/models.md"
         )
 
 
