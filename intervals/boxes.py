@@ -249,7 +249,7 @@ def touching_pairs(
     small = np.all(half <= 2.0 * np.median(half, axis=0), axis=1)
     wide = np.flatnonzero(~small)
     if 2 * wide.size > n:
-        return _sweep_pairs(boxes, periodic_axis, period)
+        return sweep_pairs(boxes, periodic_axis, period)
     narrow = np.flatnonzero(small)
     extent = 1.0 + float(np.max(np.abs(boxes)))
     reach = np.maximum(half[narrow].max(axis=0), 1e-9 * extent)  # H, per axis
@@ -280,7 +280,7 @@ def touching_pairs(
     return i[keep].astype(np.int64), j[keep].astype(np.int64)
 
 
-def _sweep_pairs(boxes, periodic_axis, period) -> tuple[np.ndarray, np.ndarray]:
+def sweep_pairs(boxes, periodic_axis, period) -> tuple[np.ndarray, np.ndarray]:
     """:func:`touching_pairs` by sweep and prune along the first non-periodic axis (boxes
     sorted by lower bound: each meets, on that axis, the boxes after it whose lower bound is at
     most its upper bound; with one periodic axis alone, also their copies shifted by

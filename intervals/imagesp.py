@@ -55,7 +55,7 @@ def grid_cells(
 
     Cell bounds are computed in floating point and rounded outward, and each image box's index
     range is extended until the (rounded) cells cover it, so the union of cells contains the
-    union of the images. Duplicates are merged (:func:`_unique_rows` on integer cell indices).
+    union of the images. Duplicates are merged (:func:`unique_rows` on integer cell indices).
     """
     lo_idx = np.floor((images[..., 0] - origin) / pitch).astype(np.int64)
     hi_idx = np.floor((images[..., 1] - origin) / pitch).astype(np.int64)
@@ -78,11 +78,11 @@ def grid_cells(
         c = counts[owner, axis]
         idx[:, axis] = lo_idx[owner, axis] + rest % c
         rest = rest // c
-    idx = _unique_rows(idx)
+    idx = unique_rows(idx)
     return np.stack([_down(origin + idx * pitch), _up(origin + (idx + 1) * pitch)], axis=-1)
 
 
-def _unique_rows(idx: np.ndarray) -> np.ndarray:
+def unique_rows(idx: np.ndarray) -> np.ndarray:
     """The distinct rows of ``idx (M, e)`` int64 in lexicographic order (what
     ``np.unique(idx, axis=0)`` returns, about five times faster: a lexicographic sort of the
     columns instead of a sort of the rows as opaque records)."""

@@ -93,7 +93,7 @@ def _initial_poses(initial) -> np.ndarray:
     return boxes
 
 
-def _uses_ray_test(ray_test: bool | None, belt: SonarBelt) -> bool:
+def uses_ray_test(ray_test: bool | None, belt: SonarBelt) -> bool:
     """Whether the ray test joins the box test (``None``: by the belt's aperture, see
     :data:`RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
     if ray_test is None:
@@ -213,7 +213,7 @@ def localize(
         inner,
         splits_per_level,
         engine,
-        _uses_ray_test(ray_test, scan.belt),
+        uses_ray_test(ray_test, scan.belt),
         max_boxes,
     )[0]
 
@@ -278,7 +278,7 @@ def gomne(
         inner,
         3,
         engine,
-        _uses_ray_test(ray_test, scan.belt),
+        uses_ray_test(ray_test, scan.belt),
         max_boxes,
     )
     if widest.is_empty:

@@ -97,21 +97,21 @@ class _SensorBoxes:
     sure: np.ndarray
 
 
-def _heading_trig(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def heading_trig(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(cos, sin)`` ``(N, 2)`` of the heading bounds of boxes ``(N, 3, 2)``: the one source of
     these values for both engines (so they see the same directions)."""
     theta = boxes[:, 2]
     return np.cos(theta), np.sin(theta)
 
 
-def _sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
+def sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
     theta_lo, theta_hi = boxes[:, 2, 0], boxes[:, 2, 1]  # (N,)
     width = theta_hi - theta_lo
     limit = ia.TRIG_EXACT_LIMIT_RAD
     trusted = (np.abs(theta_lo) < limit) & (np.abs(theta_hi) < limit)
     full = ~trusted | (width >= 2.0 * np.pi - ANGLE_MARGIN_RAD)
     # angle addition: direction of theta + c for every box bound and sensor constant c
-    cos_theta, sin_theta = _heading_trig(boxes)
+    cos_theta, sin_theta = heading_trig(boxes)
     cos_lo, sin_lo = cos_theta[:, 0:1], sin_theta[:, 0:1]  # (N, 1)
     cos_hi, sin_hi = cos_theta[:, 1:2], sin_theta[:, 1:2]
     cb, sb = belt.mount_trig
@@ -197,7 +197,7 @@ def sensor_verdicts(
     grid = scan.scene.grid
     cone_kernel.sensor_verdicts_into(
         boxes,
-        *_heading_trig(boxes),
+        *heading_trig(boxes),
         scan.scene.segments,
         scan.allowed,
         grid.origin,
@@ -229,7 +229,7 @@ def _numpy_sensor_verdicts(boxes: np.ndarray, scan: SonarScan, inner: bool):
     n, k = boxes.shape[0], scan.belt.count
     lo_d, hi_d = scan.ranges[:, 0], scan.ranges[:, 1]
     echo, free = scan.kind == ECHO, scan.kind == FREE
-    sb = _sensor_boxes(boxes, scan.belt)
+    sb = sensor_boxes(boxes, scan.belt)
 
     # visible segments: pairs (box, segment) within reach of the hull of the sensor boxes
     seg = scan.segments

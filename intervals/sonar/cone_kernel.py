@@ -137,7 +137,7 @@ def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
 
 
 @numba.njit(cache=True)
-def _sensor_rows(
+def sensor_rows(
     box,
     cos_theta,
     sin_theta,
@@ -152,7 +152,7 @@ def _sensor_rows(
 ):
     """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
-    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.cone._sensor_boxes``); returns ``sure``
+    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.cone.sensor_boxes``); returns ``sure``
     (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
     theta_lo, theta_hi = box[2, 0], box[2, 1]
     width = theta_hi - theta_lo
@@ -334,7 +334,7 @@ def sensor_verdicts_into(
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # box number + 1 of the last visit
     for n in range(boxes.shape[0]):
-        sure = _sensor_rows(
+        sure = sensor_rows(
             boxes[n],
             cos_theta[n],
             sin_theta[n],

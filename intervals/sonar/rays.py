@@ -34,7 +34,7 @@ radial mounts of the default belt ``kappa = delta``, so the ``kappa`` terms vani
 Enclosures over a box (or a piece of one, below):
 
 * ``h`` and ``(w . e) / L``: ``x`` and ``y`` occur once each: exact up to rounding.
-* ``sin B``, ``1 / sin B``, ``cot B`` (:func:`_sine_terms`): from ``sin`` and ``cos`` at the two
+* ``sin B``, ``1 / sin B``, ``cot B`` (:func:`sine_terms`): from ``sin`` and ``cos`` at the two
   float ends of the ``B`` interval. If both sines have one strict sign and the interval is
   narrower than ``MAX_B_WIDTH_RAD = 3 < pi``, ``sin`` has no zero inside (zeros are ``pi``
   apart, so one zero inside would flip the sign); likewise, if both cosines have one strict
@@ -191,7 +191,7 @@ def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi) -> tuple[np.ndarray, np.nd
     )
 
 
-def _sine_terms(
+def sine_terms(
     b_lo, b_hi
 ) -> tuple[
     np.ndarray,
@@ -287,7 +287,7 @@ def _ray_meeting(b, kappa_terms, pose_terms, x, y, seg, slanted, reading=None):
     it (eq. 3; empty, ``lo > hi``, where there is none).
     """
     (rc, rs), (g_l, we_l) = kappa_terms, pose_terms
-    one_sign, inv, cot, sin, sin_max = _sine_terms(b[..., 0], b[..., 1])
+    one_sign, inv, cot, sin, sin_max = sine_terms(b[..., 0], b[..., 1])
     gl = (g_l[..., 0], g_l[..., 1])
     rc, rs, we = (rc[..., 0], rc[..., 1]), (rs[..., 0], rs[..., 1]), (we_l[..., 0], we_l[..., 1])
     rs_cot, rs_inv = _mul(*rs, *cot), _mul(*rs, *inv)
@@ -380,7 +380,7 @@ def _k_quotient(c_lo, c_hi, s_lo, s_hi):
 
 @numba.njit(cache=True)
 def _k_sine(b_lo, b_hi, out):
-    """:func:`_sine_terms` of one interval into ``out (8,)``: one_sign, inv, cot, sin, big."""
+    """:func:`sine_terms` of one interval into ``out (8,)``: one_sign, inv, cot, sin, big."""
     tol = TRIG_TOL
     cl, sl, ch, sh = np.cos(b_lo), np.sin(b_lo), np.cos(b_hi), np.sin(b_hi)
     narrow = b_hi - b_lo < MAX_B_WIDTH_RAD

@@ -13,7 +13,7 @@ import pytest
 
 from intervals.boxes import contains_points, volume
 from intervals.errors import IntervalError
-from intervals.localize import _uses_ray_test, gomne, localize
+from intervals.localize import gomne, localize, uses_ray_test
 from intervals.sonar import rays
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.rays import (
@@ -160,7 +160,7 @@ def test_sine_terms_enclose_sampled_values():
     rng = np.random.default_rng(8)
     lo = rng.uniform(-10, 10, 2000)
     hi = lo + np.exp(rng.uniform(np.log(1e-9), np.log(3.5), 2000))
-    one_sign, inv, cot, sin, sin_max = rays._sine_terms(lo, hi)
+    one_sign, inv, cot, sin, sin_max = rays.sine_terms(lo, hi)
     assert 0.3 < one_sign.mean() < 0.99
     b = lo[:, None] + (hi - lo)[:, None] * np.linspace(0, 1, 201)
     assert np.all(np.abs(np.sin(b)) <= sin_max[:, None])
@@ -308,7 +308,7 @@ def test_ray_test_setting():
     """``None`` follows the aperture; anything but a bool or ``None`` is refused."""
     thin = SonarBelt.from_params(SonarBeltParams.default_belt(half_aperture_rad=0.05))
     wide = SonarBelt.from_params(SonarBeltParams.default_belt())
-    assert _uses_ray_test(None, thin) and not _uses_ray_test(None, wide)
-    assert _uses_ray_test(True, wide) and not _uses_ray_test(False, thin)
+    assert uses_ray_test(None, thin) and not uses_ray_test(None, wide)
+    assert uses_ray_test(True, wide) and not uses_ray_test(False, thin)
     with pytest.raises(IntervalError, match="ray_test"):
-        _uses_ray_test("yes", thin)
+        uses_ray_test("yes", thin)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from intervals import boxes as bx
 from intervals import interval as ia
 from intervals.errors import IntervalError
-from intervals.imagesp import _unique_rows, imagesp
+from intervals.imagesp import imagesp, unique_rows
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 
 
@@ -243,7 +243,7 @@ def test_imagesp_unique_rows_equals_numpy_unique():
     rng = np.random.default_rng(7)
     for rows, cols, spread in [(1, 3, 2), (50, 3, 3), (400, 3, 5), (300, 2, 1000), (200, 1, 4)]:
         idx = rng.integers(-spread, spread, size=(rows, cols), dtype=np.int64)
-        np.testing.assert_array_equal(_unique_rows(idx), np.unique(idx, axis=0))
+        np.testing.assert_array_equal(unique_rows(idx), np.unique(idx, axis=0))
 
 
 def _brute_components(boxes, periodic_axis=None, period=2.0 * np.pi):
@@ -360,4 +360,4 @@ def test_touching_pairs_of_mixed_sizes_and_by_sweep():
         i, j = np.nonzero(np.triu(np.all(touch, axis=-1), 1))
         expected = _pair_set(i, j)
         assert _pair_set(*bx.touching_pairs(boxes, periodic)) == expected
-        assert _pair_set(*bx._sweep_pairs(boxes, periodic, 2.0 * np.pi)) == expected
+        assert _pair_set(*bx.sweep_pairs(boxes, periodic, 2.0 * np.pi)) == expected

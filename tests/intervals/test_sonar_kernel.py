@@ -18,11 +18,9 @@ from intervals.interval import TRIG_EXACT_LIMIT_RAD
 from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE
 from intervals.sonar import cone_kernel
-from intervals.sonar.cone import _heading_trig, _sensor_boxes, sensor_verdicts
+from intervals.sonar.cone import heading_trig, sensor_boxes, sensor_verdicts
 from intervals.sonar.engines import Engine
-from intervals.sonar.geometry import ANGLE_MARGIN_RAD as _ANGLE_MARGIN_RAD
-from intervals.sonar.geometry import ARC_SLACK as _ARC_SLACK
-from intervals.sonar.geometry import GUARD_M
+from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M
 from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
@@ -146,11 +144,11 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
         boxes = np.ascontiguousarray(
             np.concatenate([boxes_around(truth, rng, 20), _special_boxes(truth, rng)])
         )
-        reference = _sensor_boxes(boxes, belt)
-        cos_theta, sin_theta = _heading_trig(boxes)
+        reference = sensor_boxes(boxes, belt)
+        cos_theta, sin_theta = heading_trig(boxes)
         rows = np.empty((belt.count, cone_kernel.SENSOR_COLUMNS))
         for n in range(boxes.shape[0]):
-            sure = cone_kernel._sensor_rows(
+            sure = cone_kernel.sensor_rows(
                 boxes[n],
                 cos_theta[n],
                 sin_theta[n],
@@ -158,8 +156,8 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
                 belt.half_aperture_rad,
                 belt.sensor_box_margin_m,
                 GUARD_M,
-                _ARC_SLACK,
-                _ANGLE_MARGIN_RAD,
+                ARC_SLACK,
+                ANGLE_MARGIN_RAD,
                 TRIG_EXACT_LIMIT_RAD,
                 rows,
             )
