@@ -20,6 +20,8 @@ from tests.helpers import (
     random_scan_case,
 )
 
+pytestmark = pytest.mark.slow  # global searches under a budget, checked by brute-force sampling
+
 
 def _consistent_poses(scan: SonarScan, segments, centre, half, q, rng, count=1500):
     """Poses of the box ``centre -+ half`` that leave at most ``q`` readings unexplained by the

@@ -12,6 +12,8 @@ from intervals.sonar.segment_grid import SegmentGrid
 from robotsim.maps import point_segment_distance
 from tests.helpers import DEFAULT_BELT, bounded_readings, boxes_around, cone_ranges
 
+pytestmark = pytest.mark.slow  # brute-force soundness sweeps on random maps
+
 
 def _random_segments(rng, count, extent_m, offset_m=0.0):
     """``count`` segments in a square of ``extent_m`` from ``offset_m``: mostly short walls,

@@ -318,6 +318,7 @@ def test_components_of_one_periodic_axis():
         np.testing.assert_array_equal(labels, expected)
 
 
+@pytest.mark.slow
 def test_components_of_a_large_paving():
     """200 000 boxes of a regular paving in three strips (x, y, heading): three components.
     The all-pairs definition would need 200 000^2 x 3 bytes (120 GB)."""
@@ -337,6 +338,7 @@ def _pair_set(i, j):
     return set(zip(i.tolist(), j.tolist(), strict=True))
 
 
+@pytest.mark.slow
 def test_touching_pairs_of_mixed_sizes_and_by_sweep():
     """Float boxes of sizes spread over three orders of magnitude (the wide boxes take the
     recursive and the ball searches; sets where most boxes are wide take the sweep), with and

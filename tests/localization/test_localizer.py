@@ -20,6 +20,8 @@ from scenarios.pipeline import (
 from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario
 
+pytestmark = pytest.mark.slow  # end-to-end runs compared bit for bit with the offline pipeline
+
 
 def hall(seed: int, duration_s: float = 60.0):
     spec = load_scenario("hall").with_run(seed=seed, duration_s=duration_s)

@@ -37,6 +37,8 @@ from hypothesis import strategies as st
 from scenarios.errors import ScenarioError
 from scenarios.spec import load_scenario
 
+pytestmark = pytest.mark.slow  # generated cases by the thousand, subprocesses among them
+
 ROBOTSIM = str(Path(sys.executable).with_name("robotsim"))
 
 #: The scenario every generated file starts from (then mutated).

@@ -24,6 +24,8 @@ from scenarios.pipeline import FUSED, estimate, estimation_summary
 from scenarios.runner import run_scenario, simulate_spec
 from scenarios.spec import builtin_names, load_scenario
 
+pytestmark = pytest.mark.slow  # real runs over many seeds and maps
+
 SHORT_S = 15.0
 
 #: Built-in plans the interval stage cannot yet run within a test's time and memory (issue

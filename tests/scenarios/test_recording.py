@@ -8,6 +8,8 @@ import pytest
 
 from scenarios.recording import CONE_ARC_POINTS, cone_outlines, echo_points
 
+pytestmark = pytest.mark.slow  # real runs written to .rrd files and read back, a live viewer
+
 
 def belt(k: int = 8, radius_m: float = 0.2):
     angle = np.linspace(-np.pi, np.pi, k, endpoint=False)
