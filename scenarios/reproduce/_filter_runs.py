@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -113,8 +112,8 @@ def verdict_lines(near: Mapping[str, float], claims: Mapping[str, str], what: st
     ]
     return (
         lines
-        + ["", "Paper's orderings:", ""]
-        + [f"- {verdict}: {claim}" for claim, verdict in claims.items()]
+        + ["", "Paper's orderings (claim -> ordering verdict; magnitude against the paper):", ""]
+        + [f"- {claim} -> {verdict}" for claim, verdict in claims.items()]
         + [""]
     )
 
@@ -128,30 +127,111 @@ def choices_lines(choices: Mapping[str, str]) -> list[str]:
     )
 
 
-def save_figure(
-    path: Path,
+def curve_figure(
     series: Mapping[str, np.ndarray],
     *,
     ylabel: str,
     title: str,
     log_scale: bool = False,
     reference: np.ndarray | None = None,
-) -> None:
-    """One PNG of curves over the time steps ``1..N`` (``series`` by filter; ``reference``: truth)."""
+    differences: Sequence[tuple[str, str]] = (),
+    difference_label: str = "difference",
+    extra: Mapping[str, np.ndarray] | None = None,
+) -> Any:
+    """A figure of curves over the time steps ``1..N`` (``series`` by filter, each ``(N,)``).
+
+    ``reference``: the truth, drawn in black; ``extra``: further labelled curves drawn thin
+    and grey (a bound, an oracle). ``differences``: pairs ``(a, b)`` of ``series`` drawn as
+    ``a - b`` in a second panel below, each labelled with its largest absolute value, so that
+    filters whose curves coincide in the top panel are still told apart. Returns the
+    matplotlib figure, unsaved (:func:`scenarios.reproduce.figure_style.save`).
+    """
     from matplotlib import pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    from scenarios.reproduce.figure_style import plain_ticks
+
+    rows = 2 if differences else 1
+    fig, axes = plt.subplots(
+        rows,
+        1,
+        figsize=(6.4, 4.0 + 1.8 * (rows - 1)),
+        sharex=True,
+        squeeze=False,
+        gridspec_kw={"height_ratios": [2.2, 1.0][:rows]},
+    )
+    ax = axes[0, 0]
     steps = np.arange(1, len(next(iter(series.values()))) + 1)
     if reference is not None:
         ax.plot(steps, reference, "k", linewidth=0.8, label="truth")
     for (name, values), style in zip(series.items(), LINE_STYLES, strict=True):
         ax.plot(steps, values, style, label=name)
+    for (name, values), style in zip((extra or {}).items(), LINE_STYLES, strict=False):
+        ax.plot(steps, values, style, color="0.5", linewidth=0.9, label=name)
     if log_scale:
         ax.set_yscale("log")
-    ax.set_xlabel("time step k")
+    plain_ticks(ax)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    ax.legend()
+    ax.legend(fontsize=8)
+    if differences:
+        low = axes[1, 0]
+        largest = 0.0
+        for a, b in differences:
+            gap = np.asarray(series[a]) - np.asarray(series[b])
+            peak = float(np.max(np.abs(gap)))
+            largest = max(largest, peak)
+            low.plot(steps, gap, label=f"{a} - {b} (largest |difference| {peak:.2g})")
+        low.axhline(0.0, color="k", linewidth=0.5, label="zero")
+        # differences far below the curves' scale stay a flat line, not magnified rounding
+        floor = 1e-3 * float(np.nanmax(np.abs(np.concatenate(list(series.values())))))
+        if largest < floor:
+            low.set_ylim(-floor, floor)
+        plain_ticks(low)
+        low.set_ylabel(difference_label)
+        low.legend(fontsize=7)
+    axes[-1, 0].set_xlabel("time step k")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    return fig
+
+
+#: Ours against the paper's within this factor (either way) is "the same magnitude".
+MAGNITUDE_FACTOR = 2.0
+
+
+def ratio(ours: float, paper: float | None) -> float | None:
+    """``ours / paper``, None where the paper gives no value."""
+    return None if paper is None else float(ours) / float(paper)
+
+
+def magnitude_verdict(value: float | None) -> str:
+    """Verdict on a ratio ours / paper: ``"same magnitude (x1.7)"`` within
+    :data:`MAGNITUDE_FACTOR`, otherwise ``"FAR (960 x the paper's)"`` or ``"FAR (1/6.5 of the
+    paper's)"``; ``"no paper value"`` for None."""
+    if value is None:
+        return "no paper value"
+    if 1.0 / MAGNITUDE_FACTOR <= value <= MAGNITUDE_FACTOR:
+        return f"same magnitude ({format_ratio(value)})"
+    if value > 1.0:
+        return f"FAR ({plain_number(value)} x the paper's)"
+    return f"FAR (1/{plain_number(1.0 / value)} of the paper's)"
+
+
+def with_magnitude(verdict: str, ratios: Sequence[float | None]) -> str:
+    """An ordering verdict followed by the magnitude verdict of the ratio ours / paper
+    farthest from 1 among ``ratios``, so that a tie between filters far from the paper's
+    values does not read as agreement."""
+    known = [r for r in ratios if r is not None]
+    if not known:
+        return f"{verdict}; no paper value"
+    worst = max(known, key=lambda r: max(r, 1.0 / r))
+    return f"{verdict}; {magnitude_verdict(worst)}"
+
+
+def format_ratio(value: float | None) -> str:
+    """A ratio cell: ``"x1.7"``, ``"x0.41"``; ``"-"`` without a paper value."""
+    return "-" if value is None else f"x{plain_number(value)}"
+
+
+def plain_number(value: float) -> str:
+    """A positive number in plain digits, three significant ones (``1210``, ``1.7``, ``0.0057``)."""
+    return f"{value:.0f}" if value >= 100 else f"{float(f'{value:.3g}'):g}"

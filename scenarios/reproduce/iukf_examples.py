@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,18 +33,25 @@ from localization.sigma_points import KappaSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
 from scenarios.outputs import atomic_directory, write_json, write_text
 from scenarios.reproduce._filter_runs import (
+    MAGNITUDE_FACTOR,
     add_common_arguments,
     best_of,
     check_counts,
     choices_lines,
+    curve_figure,
+    format_ratio,
     judge,
+    magnitude_verdict,
     markdown_table,
+    plain_number,
+    ratio,
     relative_difference,
     rmse_over_time,
     run_filter,
-    save_figure,
     verdict_lines,
+    with_magnitude,
 )
+from scenarios.reproduce.figure_style import save
 
 HELP = "paper 000: EKF, IEKF, UKF and IUKF on examples 1 and 2 (RMSE tables and figures 1-4)"
 
@@ -54,6 +62,18 @@ ITERATIONS = IterationSettings(max_iterations=5, tolerance=None)
 #: Paper 000 eq. 1 with n + kappa = 3 (Julier's choice; the paper gives no kappa).
 POINTS = KappaSigmaPoints(kappa=1.0)
 FILTER_NAMES = ("EKF", "IEKF", "UKF", "IUKF")
+STATES = ("x1", "x2")
+#: The paper's magnitudes, by example: RMSE "all around 10^-3" in example 1 (section IV, the
+#: text after fig. 1, for every filter and state); example 2's are in figures 3-4 only.
+PAPER_RMSE: dict[str, float | None] = {"example_1": 1e-3, "example_2": None}
+PAPER_SOURCE = {"example_1": "sec. IV text on figs. 1-2", "example_2": "figs. 3-4 only, no value"}
+#: The figures by file name: (example, state index), like the paper's figures 1-4.
+FIGURES = {
+    "fig1_example1_x1.png": ("example_1", 0),
+    "fig2_example1_x2.png": ("example_1", 1),
+    "fig3_example2_x1.png": ("example_2", 0),
+    "fig4_example2_x2.png": ("example_2", 1),
+}
 
 CHOICES = {
     "initial state (example 1)": "truth x(0) ~ N([10, 5], I); every filter starts from mean [10, 5], P(0) = I "
@@ -160,16 +180,42 @@ def simulate(
     return truth, measurements
 
 
+def posterior_crb(example: Example, truth: np.ndarray) -> np.ndarray:
+    """The posterior Cramer-Rao bound on the RMSE of each state, ``(steps, 2)``, given the
+    true trajectories ``truth (steps + 1, runs, 2)``.
+
+    The recursion of Tichavsky, Muravchik and Nehorai (1998) for additive Gaussian noise:
+    ``J(k+1) = D22 - D21 (J(k) + D11)^-1 D12`` with ``D11 = E[F' Q^-1 F]``,
+    ``D12 = D21' = -E[F]' Q^-1``, ``D22 = Q^-1 + E[H' R^-1 H]`` (``F``, ``H`` the Jacobians
+    at the true states), from ``J(0) = P(0)^-1``; the expectations are means over the runs.
+    No filter's RMSE over many runs can be below ``sqrt(diag J^-1)``.
+    """
+    q_inv = np.linalg.inv(example.process.Q)
+    r_inv = np.linalg.inv(example.measurement.R)
+    info = np.linalg.inv(example.initial_cov)
+    bound = np.empty((truth.shape[0] - 1, 2))
+    for k in range(truth.shape[0] - 1):
+        f = example.process.jacobian(truth[k], float(k))  # (runs, 2, 2)
+        h = example.measurement.jacobian(truth[k + 1])  # (runs, 1, 2)
+        d11 = np.mean(np.swapaxes(f, -1, -2) @ q_inv @ f, axis=0)
+        d12 = -np.mean(np.swapaxes(f, -1, -2), axis=0) @ q_inv
+        d22 = q_inv + np.mean(np.swapaxes(h, -1, -2) @ r_inv @ h, axis=0)
+        info = d22 - d12.T @ np.linalg.solve(info + d11, d12)
+        bound[k] = np.sqrt(np.diag(np.linalg.inv(info)))
+    return bound
+
+
 def evaluate(
     example: Example, runs: int, steps: int, rng: np.random.Generator
-) -> dict[str, np.ndarray]:
-    """RMSE over time ``(steps, 2)`` of every filter on one example."""
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """RMSE over time ``(steps, 2)`` of every filter on one example, and the posterior
+    Cramer-Rao bound ``(steps, 2)`` on the same draws (:func:`posterior_crb`)."""
     truth, measurements = simulate(example, runs, steps, rng)
     start = Gaussian(
         np.broadcast_to(example.initial_mean, (runs, 2)),
         np.broadcast_to(example.initial_cov, (runs, 2, 2)),
     )
-    return {
+    rmse = {
         name: rmse_over_time(
             run_filter(
                 kf, start, example.process, example.measurement, measurements, lambda k: (float(k),)
@@ -178,6 +224,7 @@ def evaluate(
         )
         for name, kf in filters().items()
     }
+    return rmse, posterior_crb(example, truth)
 
 
 def paper_claims(
@@ -210,6 +257,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_common_arguments(parser, "iukf-examples", steps=100)
 
 
+def example_table(name: str, average: dict, bound: np.ndarray) -> str:
+    """The ``table.md`` table of one example: time-averaged RMSE, the bound, the paper's
+    magnitude, the ratios and the verdict."""
+    paper = PAPER_RMSE[name]
+    rows = []
+    for i, state in enumerate(STATES):
+        for f in FILTER_NAMES:
+            r = ratio(average[f][i], paper)
+            rows.append(
+                [
+                    state,
+                    f,
+                    f"{average[f][i]:.4g}",
+                    f"{average[f][i] / bound[i]:.3g}",
+                    "-" if paper is None else f"~{paper:g}",
+                    format_ratio(r),
+                    magnitude_verdict(r),
+                ]
+            )
+        rows.append([state, "bound (PCRB)", f"{bound[i]:.4g}", "1", "", "", ""])
+    return markdown_table(
+        ["state", "filter", "RMSE", "RMSE / bound", "paper", "ours / paper", "magnitude"], rows
+    )
+
+
 def main(args: argparse.Namespace) -> int:
     """Run both examples, write the table and the figures; returns 0."""
     import matplotlib
@@ -227,24 +299,47 @@ def main(args: argparse.Namespace) -> int:
     md = [
         f"# Paper 000, examples 1 and 2 ({args.runs} runs, {args.steps} steps, seed {args.seed})",
         "",
+        "Time-averaged RMSE; bound: the posterior Cramer-Rao bound on the same draws "
+        "(no filter can be below it); paper: the magnitude the paper states; 'same magnitude' "
+        f"within a factor {MAGNITUDE_FACTOR:g} of it.",
+        "",
     ]
-    curves = {}
+    curves, bounds = {}, {}
     for example in EXAMPLES:
-        rmse = evaluate(example, args.runs, args.steps, rng)
-        curves[example.name] = rmse
+        rmse, bound = evaluate(example, args.runs, args.steps, rng)
+        curves[example.name], bounds[example.name] = rmse, bound
         average = {name: r.mean(axis=0) for name, r in rmse.items()}
+        average_bound = bound.mean(axis=0)
         final = {name: r[-max(1, args.steps // 4) :].mean(axis=0) for name, r in rmse.items()}
-        claims = paper_claims(average, final)[example.name]
+        paper = PAPER_RMSE[example.name]
+        ratios = {
+            name: {s: ratio(a[i], paper) for i, s in enumerate(STATES)}
+            for name, a in average.items()
+        }
+        claims = {
+            claim: with_magnitude(
+                verdict, [r for by_state in ratios.values() for r in by_state.values()]
+            )
+            for claim, verdict in paper_claims(average, final)[example.name].items()
+        }
         near = {
             "UKF vs EKF": relative_difference(average["UKF"], average["EKF"]),
             "IUKF vs IEKF": relative_difference(average["IUKF"], average["IEKF"]),
         }
         table[example.name] = {
             "rmse_time_average": {
-                name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in average.items()
+                name: dict(zip(STATES, map(float, a), strict=True)) for name, a in average.items()
             },
             "rmse_last_quarter": {
-                name: {"x1": float(a[0]), "x2": float(a[1])} for name, a in final.items()
+                name: dict(zip(STATES, map(float, a), strict=True)) for name, a in final.items()
+            },
+            "posterior_crb_time_average": dict(zip(STATES, map(float, average_bound), strict=True)),
+            "paper_rmse": paper,
+            "paper_source": PAPER_SOURCE[example.name],
+            "ratio_to_paper": ratios,
+            "magnitude_verdict": {
+                name: {s: magnitude_verdict(r) for s, r in by_state.items()}
+                for name, by_state in ratios.items()
             },
             "max_relative_rmse_difference": near,
             "paper_orderings_verdict": claims,
@@ -252,36 +347,52 @@ def main(args: argparse.Namespace) -> int:
         md += [
             f"## {example.name.replace('_', ' ').capitalize()}",
             "",
-            "Time-averaged RMSE (last quarter in brackets):",
+            f"Paper's magnitude: {PAPER_SOURCE[example.name]}"
+            + (
+                "."
+                if paper is None
+                else f"; it is {plain_number(paper / average_bound.max())} to "
+                f"{plain_number(paper / average_bound.min())} of the bound, out of any filter's reach "
+                "under the stated noise."
+            ),
+            "",
+            example_table(example.name, average, average_bound),
+            "",
+            "Last quarter of the run: "
+            + "; ".join(
+                f"{f} " + ", ".join(f"{s} {final[f][i]:.4g}" for i, s in enumerate(STATES))
+                for f in FILTER_NAMES
+            ),
             "",
         ]
-        md.append(
-            markdown_table(
-                ["state", *FILTER_NAMES],
-                [
-                    [s] + [f"{average[f][i]:.4g} ({final[f][i]:.4g})" for f in FILTER_NAMES]
-                    for i, s in enumerate(("x1", "x2"))
-                ],
-            )
-        )
-        md += [""] + verdict_lines(near, claims, "RMSE")
+        md += verdict_lines(near, claims, "RMSE")
     md += choices_lines(CHOICES)
     with atomic_directory(args.out) as out:
         write_json(out / "table.json", table)
         write_text(out / "table.md", "\n".join(md))
-        figures = [
-            ("fig1_example1_x1.png", "example_1", 0),
-            ("fig2_example1_x2.png", "example_1", 1),
-            ("fig3_example2_x1.png", "example_2", 0),
-            ("fig4_example2_x2.png", "example_2", 1),
-        ]
-        for filename, name, state in figures:
-            save_figure(
-                Path(out) / filename,
-                {f: curves[name][f][:, state] for f in FILTER_NAMES},
-                log_scale=True,
-                ylabel=f"RMSE of x{state + 1}",
-                title=f"{name.replace('_', ' ')}: RMSE of x{state + 1} over {args.runs} runs",
-            )
-    print(f"iukf-examples: wrote {args.out}/table.json, table.md and 4 figures")
+        for filename, fig in figures(curves, bounds, args.runs).items():
+            save(fig, Path(out) / filename)
+    print(f"iukf-examples: wrote {args.out}/table.json, table.md and {len(FIGURES)} figures")
     return 0
+
+
+def figures(
+    curves: dict[str, dict[str, np.ndarray]], bounds: dict[str, np.ndarray], runs: int
+) -> dict[str, Any]:
+    """Figures 1-4 of the paper by file name (unsaved): RMSE over time of the four filters
+    with the bound, and the differences of the pairs that coincide (UKF and EKF, IUKF and
+    IEKF)."""
+    out = {}
+    for filename, (name, state) in FIGURES.items():
+        number = list(FIGURES).index(filename) + 1
+        out[filename] = curve_figure(
+            {f: curves[name][f][:, state] for f in FILTER_NAMES},
+            extra={"posterior Cramer-Rao bound": bounds[name][:, state]},
+            differences=(("UKF", "EKF"), ("IUKF", "IEKF")),
+            difference_label=f"RMSE difference of x{state + 1}",
+            log_scale=True,
+            ylabel=f"RMSE of x{state + 1}",
+            title=f"paper 000 fig. {number}, {name.replace('_', ' ')}: "
+            f"RMSE of x{state + 1} over {runs} runs",
+        )
+    return out

@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import argparse
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -38,17 +40,22 @@ from localization.sigma_points import SpreadSigmaPoints
 from localization.ukf import UnscentedKalmanFilter
 from scenarios.outputs import atomic_directory, write_json, write_text
 from scenarios.reproduce._filter_runs import (
+    MAGNITUDE_FACTOR,
     add_common_arguments,
     best_of,
     check_counts,
     choices_lines,
+    curve_figure,
+    format_ratio,
     judge,
+    magnitude_verdict,
     markdown_table,
     relative_difference,
     run_filter,
-    save_figure,
     verdict_lines,
+    with_magnitude,
 )
+from scenarios.reproduce.figure_style import save
 
 HELP = (
     "paper 004: EKF, MEKF, UKF and MUKF identifying x3 in cases a and b (MSE tables, figures 1-2)"
@@ -56,6 +63,9 @@ HELP = (
 
 FILTER_NAMES = ("EKF", "MEKF", "UKF", "MUKF")
 STATES = ("x1", "x2", "x3")
+CASES = ("case_a", "case_b")
+#: The figures by file name: the case each shows (the paper's figures 1 and 2).
+FIGURES = {"fig1_x3_case_a.png": "case_a", "fig2_x3_case_b.png": "case_b"}
 INITIAL_ESTIMATE = np.array([0.9, 0.9, 0.9])
 INITIAL_COV = 1e-5 * np.eye(3)
 TRUE_INITIAL_STATE = np.array([1.0, 1.0, 1.0])
@@ -163,10 +173,46 @@ def filters() -> dict[str, object]:
     }
 
 
-def evaluate(
-    case: str, runs: int, steps: int, rng: np.random.Generator
-) -> tuple[dict, dict, np.ndarray, dict]:
-    """MSE ``(3,)`` per filter, run-averaged ``x3`` estimates ``(steps,)``, the truth, repair counts."""
+def oracle_x3(truth: np.ndarray) -> np.ndarray:
+    """Estimates ``(steps, runs)`` of ``x3(1..steps)`` by a filter with the paper's model of
+    ``x3`` (a random walk of variance ``Q[2, 2]``, start ``INITIAL_ESTIMATE[2]``, variance
+    ``INITIAL_COV[2, 2]``) that sees ``x1`` and ``x2`` without noise (``truth (steps + 1,
+    runs, 3)``).
+
+    The first row of eq. 22, ``x1(k) - x1(k-1) - 0.1 x2(k-1) = -0.1 x1(k-1) x3(k-1) +
+    xi1(k-1)``, is then a linear measurement of ``x3(k-1)`` with variance ``Q[0, 0]``, and a
+    scalar Kalman filter on it is exact. It knows more than any filter given ``z``, so its
+    MSE is what the paper's model of ``x3`` allows at best.
+    """
+    runs = truth.shape[1]
+    x3 = np.full(runs, INITIAL_ESTIMATE[2])
+    var = np.full(runs, INITIAL_COV[2, 2])
+    out = np.empty((truth.shape[0] - 1, runs))
+    for k in range(1, truth.shape[0]):
+        h = -0.1 * truth[k - 1, :, 0]
+        y = truth[k, :, 0] - truth[k - 1, :, 0] - 0.1 * truth[k - 1, :, 1]
+        gain = var * h / (h * h * var + Q[0, 0])
+        x3, var = x3 + gain * (y - h * x3), (1.0 - gain * h) * var + Q[2, 2]
+        out[k - 1] = x3
+    return out
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """One case: MSE ``(3,)`` per filter, run-averaged ``x3`` estimates ``(steps,)`` per
+    filter, the oracle's (:func:`oracle_x3`) MSE and mean ``x3`` estimates, the true ``x3``
+    ``(steps,)`` and the covariance repairs per filter."""
+
+    mse: dict[str, np.ndarray]
+    x3_mean: dict[str, np.ndarray]
+    oracle_mse: float
+    oracle_x3_mean: np.ndarray
+    x3_true: np.ndarray
+    repairs: dict[str, int]
+
+
+def evaluate(case: str, runs: int, steps: int, rng: np.random.Generator) -> CaseResult:
+    """The four filters and the oracle on the same draws of one case."""
     truth, measurements = simulate(case, runs, steps, rng)
     start = Gaussian(
         np.broadcast_to(INITIAL_ESTIMATE, (runs, 3)), np.broadcast_to(INITIAL_COV, (runs, 3, 3))
@@ -180,7 +226,24 @@ def evaluate(
         repairs[name] = sum(issubclass(w.category, CovarianceRepairWarning) for w in caught)
         mse[name] = np.mean((estimates - truth[1:]) ** 2, axis=(0, 1))
         x3_mean[name] = estimates[:, :, 2].mean(axis=1)
-    return mse, x3_mean, truth[1:, 0, 2], repairs
+    oracle = oracle_x3(truth)
+    return CaseResult(
+        mse=mse,
+        x3_mean=x3_mean,
+        oracle_mse=float(np.mean((oracle - truth[1:, :, 2]) ** 2)),
+        oracle_x3_mean=oracle.mean(axis=1),
+        x3_true=truth[1:, 0, 2],
+        repairs=repairs,
+    )
+
+
+#: The states and filters each of the paper's claims is about (for its magnitude verdict).
+CLAIM_SCOPE = {
+    "MUKF better than UKF for every state": (STATES, ("MUKF", "UKF")),
+    "x3: MUKF best of the four": (("x3",), FILTER_NAMES),
+    "x3: MEKF better than EKF and UKF": (("x3",), ("MEKF", "EKF", "UKF")),
+    "x1, x2: EKF best of the four": (("x1", "x2"), FILTER_NAMES),
+}
 
 
 def paper_claims(mse: dict[str, np.ndarray]) -> dict[str, str]:
@@ -198,6 +261,47 @@ def paper_claims(mse: dict[str, np.ndarray]) -> dict[str, str]:
             best_of(state["x1"], "EKF") + best_of(state["x2"], "EKF")
         ),
     }
+
+
+def ratios_to_paper(case: str, mse: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """Our MSE over the paper's (tables 2-3), by filter and state."""
+    return {
+        name: {s: float(mse[name][i]) / PAPER_MSE[case][name][i] for i, s in enumerate(STATES)}
+        for name in FILTER_NAMES
+    }
+
+
+def judged_claims(claims: dict[str, str], ratios: dict[str, dict[str, float]]) -> dict[str, str]:
+    """Each claim's ordering verdict with the magnitude verdict of the MSE it compares
+    (:func:`with_magnitude` over the claim's states and filters, :data:`CLAIM_SCOPE`)."""
+    return {
+        claim: with_magnitude(
+            verdict,
+            [ratios[n][s] for n in CLAIM_SCOPE[claim][1] for s in CLAIM_SCOPE[claim][0]],
+        )
+        for claim, verdict in claims.items()
+    }
+
+
+def case_table(case: str, result: CaseResult, ratios: dict[str, dict[str, float]]) -> str:
+    """The ``table.md`` table of one case: ours, the paper's, the ratio and the verdict."""
+    table_no = {"EKF": 2, "MEKF": 2, "UKF": 3, "MUKF": 3}
+    rows = [
+        [
+            s,
+            name,
+            f"{result.mse[name][i]:.4g}",
+            f"{PAPER_MSE[case][name][i]:.4g} (table {table_no[name]})",
+            format_ratio(ratios[name][s]),
+            magnitude_verdict(ratios[name][s]),
+        ]
+        for i, s in enumerate(STATES)
+        for name in FILTER_NAMES
+    ]
+    rows.append(
+        ["x3", "oracle (sees x1, x2 without noise)", f"{result.oracle_mse:.4g}", "-", "-", "-"]
+    )
+    return markdown_table(["state", "filter", "MSE", "paper", "ours / paper", "magnitude"], rows)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -222,50 +326,63 @@ def main(args: argparse.Namespace) -> int:
     md = [
         f"# Paper 004, cases a and b ({args.runs} runs, {args.steps} steps, seed {args.seed})",
         "",
+        "MSE over runs and steps beside the paper's tables 2-3; magnitude: "
+        f"'same magnitude' within a factor {MAGNITUDE_FACTOR:g} of the paper's value.",
+        "",
     ]
-    curves = {}
-    for case in ("case_a", "case_b"):
-        mse, x3_mean, x3_true, repairs = evaluate(case, args.runs, args.steps, rng)
-        curves[case] = (x3_mean, x3_true)
-        claims = paper_claims(mse)
+    results = {}
+    for case in CASES:
+        result = evaluate(case, args.runs, args.steps, rng)
+        results[case] = result
+        ratios = ratios_to_paper(case, result.mse)
+        claims = judged_claims(paper_claims(result.mse), ratios)
         near = {
-            "UKF vs EKF": relative_difference(mse["UKF"], mse["EKF"]),
-            "MUKF vs MEKF": relative_difference(mse["MUKF"], mse["MEKF"]),
+            "UKF vs EKF": relative_difference(result.mse["UKF"], result.mse["EKF"]),
+            "MUKF vs MEKF": relative_difference(result.mse["MUKF"], result.mse["MEKF"]),
         }
         table[case] = {
-            "mse": {name: dict(zip(STATES, map(float, m), strict=True)) for name, m in mse.items()},
+            "mse": {
+                name: dict(zip(STATES, map(float, m), strict=True))
+                for name, m in result.mse.items()
+            },
             "paper_mse": {
                 name: dict(zip(STATES, m, strict=True)) for name, m in PAPER_MSE[case].items()
             },
-            "covariance_repairs": repairs,
+            "ratio_to_paper": ratios,
+            "magnitude_verdict": {
+                name: {s: magnitude_verdict(r) for s, r in by_state.items()}
+                for name, by_state in ratios.items()
+            },
+            "oracle_x3_mse": result.oracle_mse,
+            "covariance_repairs": result.repairs,
             "max_relative_mse_difference": near,
             "paper_orderings_verdict": claims,
         }
-        md += [f"## Case {case[-1]}", "", "MSE (paper's tables 2-3 in brackets):", ""]
-        md.append(
-            markdown_table(
-                ["state", *FILTER_NAMES],
-                [
-                    [s] + [f"{mse[f][i]:.4g} ({PAPER_MSE[case][f][i]:.4g})" for f in FILTER_NAMES]
-                    for i, s in enumerate(STATES)
-                ],
-            )
-        )
-        md += ["", f"Covariance repairs (steps with a jitter): {repairs}", ""] + verdict_lines(
-            near, claims, "MSE"
-        )
+        md += [f"## Case {case[-1]}", "", case_table(case, result, ratios), ""]
+        md += [f"Covariance repairs (steps with a jitter): {result.repairs}", ""]
+        md += verdict_lines(near, claims, "MSE")
     md += choices_lines(CHOICES)
     with atomic_directory(args.out) as out:
         write_json(out / "table.json", table)
         write_text(out / "table.md", "\n".join(md))
-        for filename, case in (("fig1_x3_case_a.png", "case_a"), ("fig2_x3_case_b.png", "case_b")):
-            x3_mean, x3_true = curves[case]
-            save_figure(
-                Path(out) / filename,
-                x3_mean,
-                reference=x3_true,
-                ylabel=f"x3 estimate (mean of {args.runs} runs)",
-                title=f"paper 004 {case.replace('_', ' ')}: estimation of x3",
-            )
-    print(f"mukf-example: wrote {args.out}/table.json, table.md and 2 figures")
+        for filename, fig in figures(results, args.runs).items():
+            save(fig, Path(out) / filename)
+    print(f"mukf-example: wrote {args.out}/table.json, table.md and {len(FIGURES)} figures")
     return 0
+
+
+def figures(results: dict[str, CaseResult], runs: int) -> dict[str, Any]:
+    """Figures 1-2 of the paper by file name (unsaved): the run-averaged ``x3`` estimates
+    against the truth and the oracle, and the differences of the filters that coincide."""
+    return {
+        filename: curve_figure(
+            results[case].x3_mean,
+            reference=results[case].x3_true,
+            extra={"oracle (sees x1, x2 without noise)": results[case].oracle_x3_mean},
+            differences=(("UKF", "EKF"), ("MUKF", "MEKF")),
+            difference_label="x3 estimate difference",
+            ylabel=f"x3 estimate (mean of {runs} runs)",
+            title=f"paper 004 fig. {case_number}, {case.replace('_', ' ')}: estimation of x3",
+        )
+        for case_number, (filename, case) in enumerate(FIGURES.items(), start=1)
+    }
