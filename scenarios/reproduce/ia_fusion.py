@@ -520,21 +520,67 @@ def zoom_epoch(runs: dict[str, Estimation]) -> int:
 
 
 def _zoomed_epoch(spec, log, runs: dict[str, Estimation], epoch: int):
-    """Figure 13: one epoch on the map, close up: both trackers' sets, the boxes the clamp
-    used, the truth with its heading, the estimate before the clamp and both clamped ones."""
+    """Figure 13: one epoch on the map. Left, the map within the sonar's reach of the truth
+    and a frame round the close-up; right, the close-up: both trackers' sets, the boxes the
+    clamp used, the truth with its heading, the estimate before the clamp and both clamped
+    ones."""
     from matplotlib import pyplot as plt
+    from matplotlib.patches import Rectangle
 
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig, (wide, ax) = plt.subplots(1, 2, figsize=(11, 5.2))
+    _epoch_on_map(wide, spec, log, runs, epoch, detail=False)
+    _epoch_on_map(ax, spec, log, runs, epoch)
+    first = runs[TRACKERS[0]]
+    truth = log.pose[int(first.epoch_index[epoch])]
+    middle, half = _close_up(log, runs, epoch)
+    for axes, centre, size in ((wide, truth[:2], spec.sensors.sonar.d_max_m), (ax, middle, half)):
+        axes.set_xlim(centre[0] - size, centre[0] + size)
+        axes.set_ylim(centre[1] - size, centre[1] + size)
+        plain_ticks(axes, "x")
+        plain_ticks(axes)
+        _map_labels(axes)
+    wide.add_patch(
+        Rectangle(
+            tuple(middle - half), 2 * half, 2 * half, fill=False, lw=1.0, label="close-up (right)"
+        )
+    )
+    t_s = first.epochs.t_s[epoch]
+    wide.set_title(f"Fig. 13: the epoch at t = {t_s:g} s, within the sonar range")
+    ax.set_title("close up")
+    _legend(wide, loc="best", fontsize=7)
+    _legend(ax, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _close_up(log, runs: dict[str, Estimation], epoch: int) -> tuple[np.ndarray, float]:
+    """Centre ``(2,)`` and half width (m) of a square holding the truth, the boxes the clamp
+    used and the clamped estimates of ``epoch``."""
+    first = runs[TRACKERS[0]]
+    corners = [log.pose[int(first.epoch_index[epoch]), None, :2]]
+    for estimation in runs.values():
+        box = estimation.fused_box[epoch]
+        if np.isfinite(box).all():
+            corners.append(box[:2].T)
+        corners.append(estimation.after[epoch][None, :2])
+    low, high = np.concatenate(corners).min(axis=0), np.concatenate(corners).max(axis=0)
+    return (low + high) / 2.0, max(0.25, 0.6 * float(np.max(high - low)))
+
+
+def _epoch_on_map(
+    ax, spec, log, runs: dict[str, Estimation], epoch: int, detail: bool = True
+) -> None:
+    """What figure 13 shows of ``epoch``, drawn on ``ax`` (limits left to the caller): the
+    walls, the sets and the truth, and with ``detail`` the boxes the clamp used and the
+    estimates."""
     _walls(ax, spec)
     first = runs[TRACKERS[0]]
     sample = int(first.epoch_index[epoch])
     truth = log.pose[sample]
-    corners = [truth[None, :2]]
     for tracker, estimation in runs.items():
         _boxes(ax, estimation, [epoch], tracker, f"{tracker.upper()} set")
         box = estimation.fused_box[epoch]
-        if np.isfinite(box).all():
-            corners.append(box[:2].T)
+        if detail and np.isfinite(box).all():
             ax.add_patch(
                 _rectangle(
                     box,
@@ -545,11 +591,12 @@ def _zoomed_epoch(spec, log, runs: dict[str, Estimation], epoch: int):
                     label=f"box the clamp used ({tracker.upper()})",
                 )
             )
-        corners.append(estimation.after[epoch][None, :2])
+    ax.plot(*truth[:2], "o", color=COLOURS["truth"], ms=7 if detail else 3, zorder=5, label="truth")
+    if not detail:
+        return
     before = first.before[epoch]
     ukf = first.pose[UKF_ONLY][sample]
     reach = 0.15  # m, length of the heading marks
-    ax.plot(*truth[:2], "o", color=COLOURS["truth"], ms=7, zorder=5, label="truth")
     ax.plot(
         [truth[0], truth[0] + reach * np.cos(truth[2])],
         [truth[1], truth[1] + reach * np.sin(truth[2])],
@@ -585,17 +632,6 @@ def _zoomed_epoch(spec, log, runs: dict[str, Estimation], epoch: int):
             zorder=6,
             label=f"clamped to {tracker.upper()} ({np.hypot(*(after - truth)[:2]):.2f} m off)",
         )
-    low, high = np.concatenate(corners).min(axis=0), np.concatenate(corners).max(axis=0)
-    middle, half = (low + high) / 2.0, max(0.25, 0.6 * float(np.max(high - low)))
-    ax.set_xlim(middle[0] - half, middle[0] + half)
-    ax.set_ylim(middle[1] - half, middle[1] + half)
-    plain_ticks(ax, "x")
-    plain_ticks(ax)
-    _map_labels(ax)
-    ax.set_title(f"Fig. 13: the epoch at t = {first.epochs.t_s[epoch]:g} s, close up")
-    _legend(ax, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
-    fig.tight_layout()
-    return fig
 
 
 def _walls(ax, spec) -> None:
