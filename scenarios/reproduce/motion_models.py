@@ -37,7 +37,6 @@ import argparse
 import math
 import time
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -51,6 +50,13 @@ from robotsim.vehicle.sensors import VehicleMeasurements, VehicleSensorParams, m
 from robotsim.vehicle.single_track import ReferenceDrive
 from scenarios.errors import ScenarioError
 from scenarios.outputs import atomic_directory, write_json, write_text
+from scenarios.reproduce._filter_runs import (
+    MAGNITUDE_FACTOR,
+    format_ratio,
+    magnitude_verdict,
+    ratio,
+)
+from scenarios.reproduce.figure_style import axis_label, plain_ticks, save
 
 HELP = (
     "paper 001: CV, CTRV, CTRA, CCA in a GPS + odometry UKF on simulated urban and highway drives"
@@ -92,7 +98,14 @@ PAPER_TABLE_II = {
 }
 ERROR_KINDS = ("euclidean", "lateral", "longitudinal")
 #: The entries of the results written to ``table.json``.
-PUBLIC_KEYS = ("settings", "table", "restricted_euclidean", "cost_us_per_run_step", "findings")
+PUBLIC_KEYS = (
+    "settings",
+    "table",
+    "restricted_euclidean",
+    "cost_us_per_run_step",
+    "findings",
+    "against_paper",
+)
 #: A model "beats" another when its RMS error is at least this fraction smaller.
 FINDING_MARGIN = 0.05
 #: The pairs of figures 5-7: (figure file, drive, models, restriction).
@@ -271,6 +284,7 @@ def experiment(
         "restricted_euclidean": restricted,
         "cost_us_per_run_step": cost,
         "findings": findings(table, restricted),
+        "against_paper": against_paper(table),
         "series": series,
         "drives": drives,
     }
@@ -307,6 +321,42 @@ def findings(table: dict, restricted: dict) -> dict[str, dict[str, bool | None]]
     return out
 
 
+def against_paper(table: dict) -> dict:
+    """Our RMS over the paper's table II, by drive, model and error kind, with the magnitude
+    verdicts and one summary line per drive (how many within the factor, the farthest)."""
+    ratios = {
+        drive: {
+            m: {
+                kind: ratio(row[m][kind], PAPER_TABLE_II[drive][m][i])
+                for i, kind in enumerate(ERROR_KINDS)
+            }
+            for m in row
+        }
+        for drive, row in table.items()
+    }
+    summary = []
+    for drive, by_model in ratios.items():
+        cells = [(r, m, kind) for m, by_kind in by_model.items() for kind, r in by_kind.items()]
+        close = sum(1 / MAGNITUDE_FACTOR <= r <= MAGNITUDE_FACTOR for r, _, _ in cells)
+        worst, m, kind = max(cells, key=lambda c: max(c[0], 1.0 / c[0]))
+        summary.append(
+            f"{drive}: {close} of {len(cells)} within a factor {MAGNITUDE_FACTOR:g}; "
+            f"farthest {m} {kind}: {magnitude_verdict(worst)}"
+        )
+    return {
+        "paper_table_ii": {
+            drive: {m: dict(zip(ERROR_KINDS, v, strict=True)) for m, v in row.items()}
+            for drive, row in PAPER_TABLE_II.items()
+        },
+        "ratio_to_paper": ratios,
+        "magnitude_verdict": {
+            drive: {m: {k: magnitude_verdict(r) for k, r in v.items()} for m, v in row.items()}
+            for drive, row in ratios.items()
+        },
+        "summary": summary,
+    }
+
+
 def table_markdown(results: dict) -> str:
     """``table.md``: table II side by side with the paper, restricted errors, cost, findings."""
     models = list(MODELS)
@@ -315,15 +365,23 @@ def table_markdown(results: dict) -> str:
         "# Paper 001 reproduced in simulation: motion models in a GPS + odometry UKF",
         "",
         f"{s['runs']} Monte Carlo runs per drive, seed {s['seed']}, drives of {s['duration_s']:.0f} s, "
-        f"errors after a {s['warm_up_s']:.0f} s warm-up. RMS in metres; in brackets the paper's table II.",
+        f"errors after a {s['warm_up_s']:.0f} s warm-up. Each cell: our RMS (m), in brackets "
+        "the paper's table II, then ours / paper.",
         "",
-        "| scenario | RMS [m] | " + " | ".join(models) + " |",
+        "| scenario | RMS (m) | " + " | ".join(models) + " |",
         "|---|---|" + "---|" * len(models),
     ]
+    ratios = results["against_paper"]["ratio_to_paper"]
     for drive, row in results["table"].items():
         for i, kind in enumerate(ERROR_KINDS):
-            cells = [f"{row[m][kind]:.2f} ({PAPER_TABLE_II[drive][m][i]:.2f})" for m in models]
+            cells = [
+                f"{row[m][kind]:.2f} ({PAPER_TABLE_II[drive][m][i]:.2f}) "
+                f"{format_ratio(ratios[drive][m][kind])}"
+                for m in models
+            ]
             lines.append(f"| {drive if i == 0 else ''} | {kind} | " + " | ".join(cells) + " |")
+    lines += ["", "Magnitudes against table II:", ""]
+    lines += [f"- {line}" for line in results["against_paper"]["summary"]]
     lines += [
         "",
         "Euclidean RMS restricted to high yaw rate "
@@ -341,7 +399,7 @@ def table_markdown(results: dict) -> str:
             )
         cost = results["cost_us_per_run_step"][drive]
         lines.append(
-            f"| {drive} | cost [us per run-step] | | "
+            f"| {drive} | cost (µs per run-step) | | "
             + " | ".join(f"{cost[m]:.1f}" for m in models)
             + " |"
         )
@@ -371,27 +429,32 @@ def table_markdown(results: dict) -> str:
     return "\n".join(lines)
 
 
-def write_figures(folder: Path, results: dict) -> None:
-    """Figures 5-7 (Euclidean error over time) and the bird's-eye view of the drives."""
+def figures(results: dict) -> dict:
+    """Figures 5-7 (Euclidean error over time of a pair of models, their difference below:
+    CTRV and CTRA coincide to millimetres) and the bird's-eye view of the drives, by file
+    name, unsaved."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    out = {}
     for filename, drive, pair, subset in FIGURES:
         data = results["series"][drive]
-        fig, ax = plt.subplots(figsize=(9, 3.5))
+        fig, (ax, low) = plt.subplots(
+            2, 1, figsize=(9, 5.0), sharex=True, gridspec_kw={"height_ratios": [2.2, 1.0]}
+        )
         if subset is not None:
-            mask = data["masks"][subset]
-            ax.fill_between(
-                data["t_s"],
-                0,
-                1,
-                where=mask,
-                transform=ax.get_xaxis_transform(),
-                color="0.85",
-                label=subset.replace("_", " "),
-            )
+            for axes in (ax, low):
+                axes.fill_between(
+                    data["t_s"],
+                    0,
+                    1,
+                    where=data["masks"][subset],
+                    transform=axes.get_xaxis_transform(),
+                    color="0.85",
+                    label=subset.replace("_", " "),
+                )
         for model in pair:
             restricted = results["restricted_euclidean"][drive][model]
             label = f"{model} (RMS {results['table'][drive][model]['euclidean']:.2f} m"
@@ -399,23 +462,38 @@ def write_figures(folder: Path, results: dict) -> None:
                 label += f", {restricted[subset]:.2f} m in subset"
             label += ")"
             ax.plot(data["t_s"], data["euclidean"][model], lw=0.8, label=label)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("Euclidean error [m] (RMS over runs)")
-        ax.set_title(f"{' vs '.join(pair)}, {drive} drive")
+        first, second = pair
+        gap = data["euclidean"][second] - data["euclidean"][first]
+        low.plot(
+            data["t_s"],
+            gap,
+            lw=0.8,
+            color="k",
+            label=f"{second} - {first} (largest |difference| {np.max(np.abs(gap)):.3g} m)",
+        )
+        for axes in (ax, low):
+            plain_ticks(axes)
+        ax.set_ylabel(axis_label("Euclidean error, RMS over runs", "m"))
+        low.set_ylabel(axis_label("difference", "m"))
+        low.set_xlabel(axis_label("time", "s"))
+        number = filename[3]
+        ax.set_title(f"paper 001 fig. {number}: {' vs '.join(pair)}, {drive} drive")
         ax.legend(loc="upper right", fontsize=8)
+        low.legend(loc="upper right", fontsize=7)
         fig.tight_layout()
-        fig.savefig(folder / filename, dpi=120)
-        plt.close(fig)
+        out[filename] = fig
     fig, axes = plt.subplots(1, len(results["drives"]), figsize=(10, 5))
     for ax, (name, drive) in zip(np.atleast_1d(axes), results["drives"].items(), strict=True):
-        ax.plot(drive.pose[:, 0], drive.pose[:, 1], lw=0.8)
+        ax.plot(drive.pose[:, 0], drive.pose[:, 1], lw=0.8, label="reference path")
+        ax.plot(*drive.pose[0, :2], "o", color="tab:green", label="start")
         ax.set_aspect("equal")
         ax.set_title(f"{name} reference drive")
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
+        ax.set_xlabel(axis_label("x", "m"))
+        ax.set_ylabel(axis_label("y", "m"))
+        ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fig.savefig(folder / "drives.png", dpi=120)
-    plt.close(fig)
+    out["drives.png"] = fig
+    return out
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -454,7 +532,8 @@ def main(args: argparse.Namespace) -> int:
     with atomic_directory(args.out) as folder:
         write_json(folder / "table.json", {k: results[k] for k in PUBLIC_KEYS})
         write_text(folder / "table.md", table_markdown(results))
-        write_figures(folder, results)
+        for name, fig in figures(results).items():
+            save(fig, folder / name)
     print(table_markdown(results))
     print(f"written to {args.out}")
     return 0
