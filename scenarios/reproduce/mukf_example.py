@@ -173,10 +173,14 @@ def filters() -> dict[str, object]:
     }
 
 
-def oracle_x3(truth: np.ndarray) -> np.ndarray:
+def oracle_x3(
+    truth: np.ndarray,
+    start: tuple[float, float] = (INITIAL_ESTIMATE[2], INITIAL_COV[2, 2]),
+    walk_var: float = Q[2, 2],
+) -> np.ndarray:
     """Estimates ``(steps, runs)`` of ``x3(1..steps)`` by a filter with the paper's model of
-    ``x3`` (a random walk of variance ``Q[2, 2]``, start ``INITIAL_ESTIMATE[2]``, variance
-    ``INITIAL_COV[2, 2]``) that sees ``x1`` and ``x2`` without noise (``truth (steps + 1,
+    ``x3`` (a random walk of variance ``walk_var`` from ``start``, mean and variance: table 1
+    and eq. 22 by default) that sees ``x1`` and ``x2`` without noise (``truth (steps + 1,
     runs, 3)``).
 
     The first row of eq. 22, ``x1(k) - x1(k-1) - 0.1 x2(k-1) = -0.1 x1(k-1) x3(k-1) +
@@ -185,14 +189,14 @@ def oracle_x3(truth: np.ndarray) -> np.ndarray:
     MSE is what the paper's model of ``x3`` allows at best.
     """
     runs = truth.shape[1]
-    x3 = np.full(runs, INITIAL_ESTIMATE[2])
-    var = np.full(runs, INITIAL_COV[2, 2])
+    x3 = np.full(runs, start[0])
+    var = np.full(runs, start[1])
     out = np.empty((truth.shape[0] - 1, runs))
     for k in range(1, truth.shape[0]):
         h = -0.1 * truth[k - 1, :, 0]
         y = truth[k, :, 0] - truth[k - 1, :, 0] - 0.1 * truth[k - 1, :, 1]
         gain = var * h / (h * h * var + Q[0, 0])
-        x3, var = x3 + gain * (y - h * x3), (1.0 - gain * h) * var + Q[2, 2]
+        x3, var = x3 + gain * (y - h * x3), (1.0 - gain * h) * var + walk_var
         out[k - 1] = x3
     return out
 

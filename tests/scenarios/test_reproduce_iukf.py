@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import json
 
+import matplotlib
+
+matplotlib.use("Agg")
+
 import numpy as np
 import pytest
+from matplotlib import pyplot as plt
 
+from localization.models import MeasurementModel, ProcessModel
 from scenarios.cli import main
+from scenarios.reproduce import iukf_examples as iukf
+from scenarios.reproduce.figure_style import legend_labels, unlabelled_artists
 
 
 @pytest.mark.slow
@@ -64,3 +72,73 @@ def test_iukf_examples_refuses_zero_runs(tmp_path, capsys):
     assert main(["reproduce", "iukf-examples", "--runs", "0", "--out", str(tmp_path / "x")]) == 2
     assert "--runs: must be >= 1" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_the_table_judges_magnitudes_against_the_paper(tmp_path):
+    """A smoke-size run through the CLI: the paper's value, ours / paper and the verdict are
+    in table.json and table.md; example 1 is far from the paper's "around 1e-3"."""
+    out = tmp_path / "iukf"
+    argv = ["reproduce", "iukf-examples", "--runs", "4", "--steps", "10", "--out", str(out)]
+    assert main(argv) == 0
+    table = json.loads((out / "table.json").read_text())
+    ex1, ex2 = table["example_1"], table["example_2"]
+    assert ex1["paper_rmse"] == 1e-3 and ex2["paper_rmse"] is None
+    for name in ("EKF", "IEKF", "UKF", "IUKF"):
+        for state in ("x1", "x2"):
+            r = ex1["ratio_to_paper"][name][state]
+            assert np.isfinite(r)
+            assert r == pytest.approx(ex1["rmse_time_average"][name][state] / 1e-3)
+            assert ex1["magnitude_verdict"][name][state].startswith("FAR")
+            assert ex2["ratio_to_paper"][name][state] is None
+    assert all("FAR" in v for v in ex1["paper_orderings_verdict"].values())
+    md = (out / "table.md").read_text()
+    assert "| state | filter | RMSE | RMSE / bound | paper | ours / paper | magnitude |" in md
+    assert "| x1 | bound (PCRB) |" in md
+
+
+def test_the_bound_of_a_linear_gaussian_model_is_the_kalman_covariance():
+    """For linear models the posterior Cramer-Rao bound is exact: the Kalman filter's
+    posterior covariance, computed here by the plain Riccati recursion."""
+    f_mat = np.array([[1.0, 0.05], [0.0, 1.0]])
+    h_mat = np.array([[1.0, 0.5]])
+    q, r, p0 = np.diag([0.01, 0.02]), np.array([[0.3]]), np.diag([1.0, 2.0])
+    example = iukf.Example(
+        "linear",
+        ProcessModel(
+            lambda x, k: x @ f_mat.T,
+            q,
+            jacobian=lambda x, k: np.broadcast_to(f_mat, (*x.shape[:-1], 2, 2)),
+        ),
+        MeasurementModel(
+            lambda x: x @ h_mat.T,
+            r,
+            jacobian=lambda x: np.broadcast_to(h_mat, (*x.shape[:-1], 1, 2)),
+        ),
+        np.zeros(2),
+        p0,
+    )
+    truth, _ = iukf.simulate(example, runs=3, steps=12, rng=np.random.default_rng(0))
+    bound = iukf.posterior_crb(example, truth)
+    p = p0
+    for k in range(12):
+        p = f_mat @ p @ f_mat.T + q
+        gain = p @ h_mat.T @ np.linalg.inv(h_mat @ p @ h_mat.T + r)
+        p = (np.eye(2) - gain @ h_mat) @ p
+        np.testing.assert_allclose(bound[k], np.sqrt(np.diag(p)), rtol=1e-10)
+
+
+def test_every_curve_of_figures_1_to_4_has_its_legend_entry():
+    rng = np.random.default_rng(1)
+    curves, bounds = {}, {}
+    for example in iukf.EXAMPLES:
+        curves[example.name], bounds[example.name] = iukf.evaluate(example, 3, 8, rng)
+    figures = iukf.figures(curves, bounds, runs=3)
+    assert list(figures) == list(iukf.FIGURES)
+    for fig in figures.values():
+        labels = legend_labels(fig)
+        assert labels[:5] == ["EKF", "IEKF", "UKF", "IUKF", "posterior Cramer-Rao bound"]
+        assert labels[5].startswith("UKF - EKF (largest |difference|")
+        assert labels[6].startswith("IUKF - IEKF (largest |difference|")
+        assert unlabelled_artists(fig) == []
+        assert fig.axes[0].get_yscale() == "log"
+        plt.close(fig)
