@@ -115,3 +115,47 @@ def test_bad_options_get_one_line_errors(tmp_path, capsys):
         "robotsim: error: --duration: must be >= 20 s, got 5.0",
     ]
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow
+def test_table_ii_is_judged_against_the_paper(short_run):
+    _, out = short_run
+    table = json.loads((out / "table.json").read_text())
+    against = table["against_paper"]
+    for drive, row in table["table"].items():
+        for model, errors in row.items():
+            for i, kind in enumerate(("euclidean", "lateral", "longitudinal")):
+                paper = mm_repro.PAPER_TABLE_II[drive][model][i]
+                assert against["paper_table_ii"][drive][model][kind] == paper
+                r = against["ratio_to_paper"][drive][model][kind]
+                assert np.isfinite(r) and r == pytest.approx(errors[kind] / paper)
+                verdict = against["magnitude_verdict"][drive][model][kind]
+                assert verdict.startswith("FAR") == (not 0.5 <= r <= 2.0)
+    assert len(against["summary"]) == 2
+    md = (out / "table.md").read_text()
+    assert "| scenario | RMS (m) |" in md and "Magnitudes against table II:" in md
+    assert "[m]" not in md
+
+
+@pytest.mark.slow
+def test_figures_5_to_7_show_the_difference_of_their_pair():
+    from matplotlib import pyplot as plt
+
+    from scenarios.reproduce.figure_style import legend_labels, unlabelled_artists
+
+    results = mm_repro.experiment(runs=2, seed=5, duration_s=25.0)
+    figures = mm_repro.figures(results)
+    assert list(figures) == [f for f, *_ in mm_repro.FIGURES] + ["drives.png"]
+    for filename, _, (first, second), subset in mm_repro.FIGURES:
+        fig = figures[filename]
+        labels = legend_labels(fig)
+        assert [label.split(" ")[0] for label in labels if "RMS" in label] == [first, second]
+        assert any(
+            label.startswith(f"{second} - {first} (largest |difference|") for label in labels
+        )
+        if subset is not None:
+            assert subset.replace("_", " ") in labels
+        assert fig.axes[0].get_ylabel() == "Euclidean error, RMS over runs (m)"
+    for fig in figures.values():
+        assert unlabelled_artists(fig) == []
+        plt.close(fig)
