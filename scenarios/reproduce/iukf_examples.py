@@ -8,10 +8,12 @@ Example 1 (eq. 13): ``x(k+1) = [[1, T], [0, 1]] x(k) + w``, ``z = x1 x2^2 + v``,
 ``C_w = diag(300, 0.1)``, ``C_v = 3``. 100 Monte Carlo runs of 100 steps; every filter sees
 the same truth and measurement draws, all runs of a filter in one batched call per step.
 
-Writes ``DIR/table.json`` (time-averaged RMSE per state and filter, per example, and the
-paper's orderings checked), ``DIR/table.md`` and ``DIR/fig1_example1_x1.png``,
+Writes ``DIR/table.json`` (time-averaged RMSE per state and filter, per example, the
+posterior Cramer-Rao bound on the same draws, the paper's magnitude with ours / paper and a
+verdict, and the paper's orderings checked), ``DIR/table.md`` and ``DIR/fig1_example1_x1.png``,
 ``DIR/fig2_example1_x2.png``, ``DIR/fig3_example2_x1.png``, ``DIR/fig4_example2_x2.png``
-(RMSE over time, like the paper's figures 1-4).
+(RMSE over time with the bound, like the paper's figures 1-4, and below the differences of
+the filters that coincide).
 
 Choices where the paper is silent (also written to ``table.md``): see ``CHOICES``.
 """
