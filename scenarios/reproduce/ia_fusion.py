@@ -48,7 +48,7 @@ from scenarios.reproduce.figure_style import axis_label, plain_ticks, save
 from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario
 
-HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP trackers on hall (table, figures 7-13)"
+HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGESP on hall (table, figures 7-13)"
 
 TRACKERS = tuple(Tracker)
 SCENARIO = "hall"
