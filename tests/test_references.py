@@ -85,10 +85,10 @@ def _sources() -> list[Path]:
     return files + [*(ROOT / "docs").glob("*.md"), ROOT / "README.md"]
 
 
-def citations() -> list[tuple[str, str, str, str]]:
+def citations() -> list[tuple[str, ...]]:
     """``(file, paper, place word, places)`` of every citation with a place in the
     repository's Python files and docs (f-string placeholders have no place and are left out)."""
-    found = []
+    found: list[tuple[str, ...]] = []
     for path in _sources():
         text = path.read_text(encoding="utf-8")
         found.extend((str(path.relative_to(ROOT)), *m.groups()) for m in CITATION.finditer(text))

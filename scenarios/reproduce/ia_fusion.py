@@ -642,7 +642,10 @@ def _walls(ax, spec) -> None:
 
     ax.add_collection(
         LineCollection(
-            np.asarray(spec.map.segments), colors=COLOURS["walls"], lw=1.5, label="walls, landmarks"
+            list(np.asarray(spec.map.segments)),
+            colors=COLOURS["walls"],
+            lw=1.5,
+            label="walls, landmarks",
         )
     )
     ax.autoscale_view()
@@ -685,13 +688,14 @@ def _legend(ax, **options) -> None:
     """The legend of every labelled element of ``ax``. A patch collection (the sets) has no
     legend handle of its own: a rectangle of its colours stands in for it."""
     from matplotlib.collections import PatchCollection
+    from matplotlib.colors import to_hex
     from matplotlib.patches import Patch
 
     handles, labels = ax.get_legend_handles_labels()
     handles = [
         Patch(
-            facecolor=h.get_facecolor()[0],
-            edgecolor=h.get_edgecolor()[0],
+            facecolor=to_hex(np.asarray(h.get_facecolor())[0], keep_alpha=True),
+            edgecolor=to_hex(np.asarray(h.get_edgecolor())[0], keep_alpha=True),
             lw=1.0,
         )
         if isinstance(h, PatchCollection)

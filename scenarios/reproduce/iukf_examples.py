@@ -195,10 +195,12 @@ def posterior_crb(example: Example, truth: np.ndarray) -> np.ndarray:
     q_inv = np.linalg.inv(example.process.Q)
     r_inv = np.linalg.inv(example.measurement.R)
     info = np.linalg.inv(example.initial_cov)
+    f_jac, h_jac = example.process.jacobian, example.measurement.jacobian
+    assert f_jac is not None and h_jac is not None, "the bound needs both Jacobians"
     bound = np.empty((truth.shape[0] - 1, 2))
     for k in range(truth.shape[0] - 1):
-        f = example.process.jacobian(truth[k], float(k))  # (runs, 2, 2)
-        h = example.measurement.jacobian(truth[k + 1])  # (runs, 1, 2)
+        f = f_jac(truth[k], float(k))  # (runs, 2, 2)
+        h = h_jac(truth[k + 1])  # (runs, 1, 2)
         d11 = np.mean(np.swapaxes(f, -1, -2) @ q_inv @ f, axis=0)
         d12 = -np.mean(np.swapaxes(f, -1, -2), axis=0) @ q_inv
         d22 = q_inv + np.mean(np.swapaxes(h, -1, -2) @ r_inv @ h, axis=0)

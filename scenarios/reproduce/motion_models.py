@@ -54,7 +54,6 @@ from scenarios.reproduce._filter_runs import (
     MAGNITUDE_FACTOR,
     format_ratio,
     magnitude_verdict,
-    ratio,
 )
 from scenarios.reproduce.figure_style import axis_label, plain_ticks, save
 
@@ -327,7 +326,7 @@ def against_paper(table: dict) -> dict:
     ratios = {
         drive: {
             m: {
-                kind: ratio(row[m][kind], PAPER_TABLE_II[drive][m][i])
+                kind: row[m][kind] / PAPER_TABLE_II[drive][m][i]
                 for i, kind in enumerate(ERROR_KINDS)
             }
             for m in row

@@ -61,7 +61,7 @@ def test_the_sets_are_outlined_patches_named_in_the_legend(figures):
             f"fused ({tracker})",
         ]
         (sets,) = [c for c in fig.axes[0].collections if isinstance(c, PatchCollection)]
-        assert len(sets.get_paths()) > 0 and sets.get_linewidths()[0] > 0
+        assert len(sets.get_paths()) > 0 and np.asarray(sets.get_linewidth())[0] > 0
 
 
 def test_the_new_figures_name_what_they_draw(figures):
