@@ -53,8 +53,9 @@ HELP = "paper 002: UKF dead reckoning clamped to interval boxes, SIVIA vs IMAGES
 TRACKERS = tuple(Tracker)
 SCENARIO = "hall"
 
-#: Boxes are drawn at every this many epochs in the figures (all of them would hide the paths).
-BOX_EVERY = 5
+#: Boxes are drawn at every this many epochs in the figures (all of them would hide the paths);
+#: a prime, so that on the laps of ``hall`` they fall at new places instead of piling up.
+BOX_EVERY = 7
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
