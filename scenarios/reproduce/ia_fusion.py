@@ -537,9 +537,14 @@ def _zoomed_epoch(spec, log, runs: dict[str, Estimation], epoch: int):
     first = runs[TRACKERS[0]]
     truth = log.pose[int(first.epoch_index[epoch])]
     middle, half = _close_up(log, runs, epoch)
-    for axes, centre, size in ((wide, truth[:2], spec.sensors.sonar.d_max_m), (ax, middle, half)):
-        axes.set_xlim(centre[0] - size, centre[0] + size)
-        axes.set_ylim(centre[1] - size, centre[1] + size)
+    walls = np.asarray(spec.map.segments).reshape(-1, 2)  # the map's extent bounds the view
+    low = np.maximum(truth[:2] - spec.sensors.sonar.d_max_m, walls.min(axis=0) - 0.2)
+    high = np.minimum(truth[:2] + spec.sensors.sonar.d_max_m, walls.max(axis=0) + 0.2)
+    wide.set_xlim(low[0], high[0])
+    wide.set_ylim(low[1], high[1])
+    ax.set_xlim(middle[0] - half, middle[0] + half)
+    ax.set_ylim(middle[1] - half, middle[1] + half)
+    for axes in (wide, ax):
         plain_ticks(axes, "x")
         plain_ticks(axes)
         _map_labels(axes)
@@ -624,6 +629,13 @@ def _epoch_on_map(
         ms=7,
         zorder=5,
         label=f"fused branch before the clamp ({np.hypot(*(before - truth)[:2]):.2f} m off)",
+    )
+    ax.plot(
+        [before[0], first.after[epoch][0]],
+        [before[1], first.after[epoch][1]],
+        ":",
+        color="tab:orange",
+        label=f"the clamp's move ({TRACKERS[0].upper()})",
     )
     for tracker, estimation in runs.items():
         after = estimation.after[epoch]
