@@ -46,6 +46,11 @@ def test_every_figure_is_written_with_a_legend_entry_for_every_drawn_element(fig
     }
     for name, fig in figures.items():
         assert unlabelled_artists(fig) == [], name
+        # one unit style: "quantity (unit)", never "[unit]"
+        for ax in fig.axes:
+            for label in (ax.get_xlabel(), ax.get_ylabel()):
+                assert "[" not in label, (name, label)
+            assert ax.get_xlabel() in ("", "time (s)", "x (m)"), (name, ax.get_xlabel())
 
 
 def test_the_sets_are_outlined_patches_named_in_the_legend(figures):
