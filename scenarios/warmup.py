@@ -16,6 +16,9 @@ install (``.ci/run`` does); it takes each built-in path a few steps:
 A second warm-up loads what the first compiled and so takes a few seconds. Warm-ups started
 side by side (CI jobs, a campaign's parent and a user's run) take turns on a lock file
 (:func:`turn`), so that no two of them compile the same entries into one cache at once.
+
+A timing that a table reports runs inside :func:`no_compilation`, which refuses a figure that
+counted numba compiling: the code that times warms its path first, untimed.
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+
+from scenarios.errors import InternalError
 
 #: Simulated seconds of each short run of the ``run`` part (an interval epoch at 0 s and 1 s).
 RUN_S = 1.0
@@ -128,6 +133,22 @@ def warm_up(parts: tuple[str, ...] = tuple(PARTS)) -> dict[str, float]:
             PARTS[name]()
             seconds[name] = time.perf_counter() - start
     return seconds
+
+
+@contextlib.contextmanager
+def no_compilation(what: str) -> Iterator[None]:
+    """Run the block, a timed one, and raise :class:`InternalError` if numba compiled anything
+    meanwhile (its ``numba:compile`` events): ``what``'s figure would count compile time as
+    run time. Loading an entry from the disk cache is not a compilation (milliseconds)."""
+    from numba.core import event
+
+    with event.install_recorder("numba:compile") as recorder:
+        yield
+    compiled = sorted({item.data["dispatcher"].py_func.__qualname__ for _, item in recorder.buffer})
+    if compiled:
+        raise InternalError(
+            f"{what}: numba compiled {', '.join(compiled)} while timed (warm the path up first)"
+        )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
