@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import importlib
 import os
 import platform
@@ -35,8 +34,7 @@ import threading
 import traceback
 import warnings
 from collections.abc import Iterator, Sequence
-from importlib import metadata
-from typing import Any, NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 from robotsim.errors import RobotsimError
 from scenarios.errors import ScenarioError
@@ -76,14 +74,15 @@ class OneLineParser(argparse.ArgumentParser):
 
 def version() -> str:
     """The installed version of the testbed (``unknown`` when run from a bare source tree)."""
+    from importlib import metadata  # read only when asked for: it takes a tenth of the start-up
+
     try:
         return metadata.version(DISTRIBUTION)
     except metadata.PackageNotFoundError:
         return "unknown"
 
 
-@dataclasses.dataclass(frozen=True)
-class Command:
+class Command(NamedTuple):
     """A sub-command of ``robotsim``: its line in ``robotsim --help`` and the module that
     holds its options and its handler. The module is imported only when the command is
     chosen, so that ``robotsim --help`` and ``robotsim scenarios`` start in a fraction of a
@@ -164,6 +163,26 @@ class LazySubcommands(argparse._SubParsersAction):
         super().__call__(parser, namespace, values, option_string)
 
 
+class VersionAction(argparse.Action):
+    """``--version``: print ``robotsim <version>`` and exit (the version looked up only then)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any):
+        kwargs.setdefault("help", "show program's version number and exit")
+        super().__init__(
+            option_strings, argparse.SUPPRESS, nargs=0, default=argparse.SUPPRESS, **kwargs
+        )
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        print(f"robotsim {version()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``robotsim`` with its sub-commands (each configured only once
     chosen: :class:`LazySubcommands`)."""
@@ -171,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="robotsim",
         description="Mobile-robot simulation and guaranteed-localisation testbed.",
     )
-    parser.add_argument("--version", action="version", version=f"robotsim {version()}")
+    parser.add_argument("--version", action=VersionAction)
     parser.add_argument(
         "--debug",
         action="store_true",
