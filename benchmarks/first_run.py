@@ -16,7 +16,8 @@ is there, as pip compiles it). Wall time and CPU time (user + system of the chil
 ``--compare TREE``: the start-up and the cold runs of another code tree (a clone of the code
 before) too, each figure interleaved with this tree's (it has no warm-up command).
 
-    python benchmarks/first_run.py [--duration 10] [--repeats 5] [--compare TREE] [--write]
+    python benchmarks/first_run.py [--duration 10] [--repeats 5] [--compare TREE
+                                   [--compare-label TEXT]] [--write]
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ from _common import machine_line, markdown_table, write_section
 
 TREE = Path(__file__).resolve().parent.parent
 
-#: A filter step in a new process: prints the seconds of its first step (imports excluded).
+#: A filter step in a new process: prints the wall and CPU seconds of its first step (the
+#: imports excluded).
 STEP = """
 import json, time
 import numpy as np
@@ -46,9 +48,9 @@ from localization.ukf import UnscentedKalmanFilter
 kalman = {kind}()
 belief = Gaussian(np.array([0.0, 0.0, 0.1, 1.0, 0.0]), 0.1 * np.eye(5), CTRV.angle_indices)
 process, gps = CTRV.process_model(0.01 * np.eye(5)), gps_model(np.eye(2))
-start = time.perf_counter()
+start, cpu = time.perf_counter(), time.process_time()
 kalman.update(kalman.predict(belief, process, 0.01), np.zeros(2), gps)
-print(json.dumps(time.perf_counter() - start))
+print(json.dumps([time.perf_counter() - start, time.process_time() - cpu]))
 """
 
 
@@ -77,9 +79,10 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=10.0, help="simulated s of the runs")
     parser.add_argument("--repeats", type=int, default=5, help="start-up: best of this many")
     parser.add_argument("--compare", type=Path, help="another code tree, measured alongside")
+    parser.add_argument("--compare-label", default="compared tree", help="its column's title")
     parser.add_argument("--write", action="store_true", help="write the section of BENCHMARKS.md")
     args = parser.parse_args()
-    trees = {"this tree": TREE} | ({"compared tree": args.compare} if args.compare else {})
+    trees = {"this tree": TREE} | ({args.compare_label: args.compare} if args.compare else {})
     machine = machine_line("numba")
     rows: list[list[str]] = []
     with tempfile.TemporaryDirectory() as scratch:
@@ -125,27 +128,23 @@ def main() -> int:
         after = [measure(run, TREE, warmed, work)[:2] for _ in range(2)]
         rows.append([f"{label}, first after the warm-up", cell(*after[0]), *blank])
         rows.append([f"{label}, second after the warm-up", cell(*after[1]), *blank])
-        ratio = after[0][0] / after[1][0]
-        rows.append(["first / second after the warm-up (wall)", f"{ratio:.2f}", *blank])
+        ratio = f"{after[0][0] / after[1][0]:.2f} / {after[0][1] / after[1][1]:.2f}"
+        rows.append(["first / second after the warm-up", ratio, *blank])
         for kind, name in (("UnscentedKalmanFilter", "UKF"), ("ExtendedKalmanFilter", "EKF")):
             warm = json.loads(measure(["-c", STEP.format(kind=kind)], TREE, warmed, work)[2])
-            rows.append(
-                [
-                    f"first compiled {name} step of a process: empty cache / warmed (s)",
-                    f"{steps_cold[kind]:.2f} / {warm:.4f}",
-                    *blank,
-                ]
-            )
+            label = f"first compiled {name} step (CTRV) of a process"
+            rows.append([f"{label}, empty cache", cell(*steps_cold[kind]), *blank])
+            rows.append([f"{label}, after the warm-up", cell(*warm), *blank])
     header = ["figure (wall s / CPU s)", *trees]
     body = "\n\n".join(
         [
             "`python benchmarks/first_run.py"
-            + (f" --compare {args.compare}" if args.compare else "")
+            + (f" --compare TREE --compare-label '{args.compare_label}'" if args.compare else "")
             + f" --duration {args.duration:g} --repeats {args.repeats}`; each figure a new process,"
             " numba's cache an empty folder (a fresh install) unless warmed; wall and CPU time"
             " (user + system) of the process.",
             markdown_table(header, rows),
-            f"Machine: {machine}.",
+            f"Machine: {machine}; load {os.getloadavg()[0]:.1f} at the end.",
         ]
     )
     print(body)
