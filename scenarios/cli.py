@@ -8,6 +8,7 @@
     robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
     robotsim report RESULTS [--out DIR]
     robotsim reproduce NAME [options]
+    robotsim warmup [--only run | --only filters]
 
 Exit statuses and what stderr holds (always at most one line, without ``--debug``):
 
