@@ -102,10 +102,12 @@ PARTS: dict[str, Callable[[], None]] = {"run": warm_runs, "filters": warm_filter
 
 
 def lock_path() -> Path:
-    """The lock file of this installation's cache: one per (package folder, ``NUMBA_CACHE_DIR``),
-    in the temporary folder (always writable, unlike an installed package)."""
+    """The lock file of this installation's cache: one per (package folder, ``NUMBA_CACHE_DIR``,
+    user), in the temporary folder (always writable, unlike an installed package; per user,
+    since another user's lock file could not be opened, and a shared read-only install
+    leaves each user a cache of their own)."""
     package = Path(__file__).resolve().parent.parent
-    key = f"{package}\0{os.environ.get('NUMBA_CACHE_DIR', '')}".encode()
+    key = f"{package}\0{os.environ.get('NUMBA_CACHE_DIR', '')}\0{os.getuid()}".encode()
     return (
         Path(tempfile.gettempdir()) / f"robotsim-warmup-{hashlib.sha256(key).hexdigest()[:16]}.lock"
     )
