@@ -27,7 +27,6 @@ from intervals.boxes import (
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen
 from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, sivia
-from intervals.sonar import rays
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -129,6 +128,8 @@ def _pave(
     stored, counts = [], []
 
     def recount(b, reject):
+        from intervals.sonar import rays  # its kernels compile only for runs with the ray test
+
         return rays.joint_rejection_counts(
             b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
         )

@@ -493,18 +493,21 @@ def batched(runs: Sequence[CampaignRun], size: int) -> list[list[CampaignRun]]:
 def warm_up(runs: Sequence[CampaignRun]) -> None:
     """Compile numba's kernels here, once, before any worker starts: one short run per
     distinct ``[estimation]`` setting of the campaign (each may use other kernels); the
-    workers then load them from the disk cache."""
+    workers then load them from the disk cache. Under the warm-up lock
+    (:func:`scenarios.warmup.turn`): campaigns and warm-ups started side by side take turns."""
     from scenarios.runner import run_scenario
+    from scenarios.warmup import turn
 
     seen: set[str] = set()
-    for run in runs:
-        estimation = json.dumps(run.spec.estimation.as_keys(), sort_keys=True, default=str)
-        if estimation in seen:
-            continue
-        seen.add(estimation)
-        short = min(WARM_UP_DURATION_S, run.spec.run.duration_s)
-        with contextlib.suppress(Exception):  # a run that fails will fail (and be recorded) later
-            run_scenario(run.spec.with_run(duration_s=short))
+    with turn():
+        for run in runs:
+            estimation = json.dumps(run.spec.estimation.as_keys(), sort_keys=True, default=str)
+            if estimation in seen:
+                continue
+            seen.add(estimation)
+            short = min(WARM_UP_DURATION_S, run.spec.run.duration_s)
+            with contextlib.suppress(Exception):  # a failing run fails (and is recorded) later
+                run_scenario(run.spec.with_run(duration_s=short))
 
 
 # ---------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@
     robotsim campaign FILE [--out DIR] [--resume] [--workers N] [--cluster local | --scheduler ADDRESS]
     robotsim report RESULTS [--out DIR]
     robotsim reproduce NAME [options]
+    robotsim warmup [--only run | --only filters]
 
 Exit statuses and what stderr holds (always at most one line, without ``--debug``):
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import os
 import platform
 import signal
@@ -33,8 +35,7 @@ import threading
 import traceback
 import warnings
 from collections.abc import Iterator, Sequence
-from importlib import metadata
-from typing import NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 from robotsim.errors import RobotsimError
 from scenarios.errors import ScenarioError
@@ -74,60 +75,132 @@ class OneLineParser(argparse.ArgumentParser):
 
 def version() -> str:
     """The installed version of the testbed (``unknown`` when run from a bare source tree)."""
+    from importlib import metadata  # read only when asked for: it takes a tenth of the start-up
+
     try:
         return metadata.version(DISTRIBUTION)
     except metadata.PackageNotFoundError:
         return "unknown"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``robotsim`` with its sub-commands."""
-    from scenarios import campaign as campaign_command
-    from scenarios import commands, sensor_log
-    from scenarios import report as report_command
-    from scenarios.reproduce import experiments
+class Command(NamedTuple):
+    """A sub-command of ``robotsim``: its line in ``robotsim --help`` and the module that
+    holds its options and its handler. The module is imported only when the command is
+    chosen, so that ``robotsim --help`` and ``robotsim scenarios`` start in a fraction of a
+    second (none of numba, rerun, matplotlib, pyarrow or dask: ``tests/scenarios/test_cli_imports.py``)."""
 
+    help: str
+    module: str
+    #: The module's function that adds the command's options (None: it takes none).
+    add_arguments: str | None
+    #: The module's function that runs the command (None: its own sub-commands set one).
+    handler: str | None
+
+    def configure(self, parser: argparse.ArgumentParser) -> None:
+        """Import the command's module; give ``parser`` its options and its handler."""
+        module = importlib.import_module(self.module)
+        if self.add_arguments is not None:
+            getattr(module, self.add_arguments)(parser)
+        if self.handler is not None:
+            parser.set_defaults(handler=getattr(module, self.handler))
+
+
+#: The sub-commands, in the order ``robotsim --help`` lists them.
+COMMANDS = {
+    "run": Command(
+        "run a scenario headless; write its recording and summary",
+        "scenarios.commands",
+        "add_run_arguments",
+        "run",
+    ),
+    "replay": Command(
+        "run the localiser on a sensor log (no simulator)",
+        "scenarios.sensor_log",
+        "add_replay_arguments",
+        "replay_command",
+    ),
+    "scenarios": Command(
+        "list the built-in scenarios", "scenarios.commands", None, "list_scenarios"
+    ),
+    "campaign": Command(
+        "run every scenario x seed x setting of a campaign file; one results table",
+        "scenarios.campaign",
+        "add_arguments",
+        "main",
+    ),
+    "report": Command(
+        "aggregate a campaign's results per setting (confidence intervals, figures)",
+        "scenarios.report",
+        "add_arguments",
+        "main",
+    ),
+    "reproduce": Command(
+        "reproduce a paper's experiment", "scenarios.reproduce", "add_arguments", None
+    ),
+    "warmup": Command(
+        "compile the numba kernels of the built-in paths into the disk cache (once, after install)",
+        "scenarios.warmup",
+        "add_arguments",
+        "main",
+    ),
+}
+
+
+class LazySubcommands(argparse._SubParsersAction):
+    """The sub-parsers of :data:`COMMANDS`, each given its options when its command is the
+    one chosen (argparse reaches a sub-parser only through this action's call)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        assert isinstance(values, list)  # nargs=PARSER: the command and its arguments
+        name = values[0]
+        if name in COMMANDS:  # else argparse reports the invalid choice
+            COMMANDS[name].configure(self._name_parser_map[name])
+        super().__call__(parser, namespace, values, option_string)
+
+
+class VersionAction(argparse.Action):
+    """``--version``: print ``robotsim <version>`` and exit (the version looked up only then)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any):
+        kwargs.setdefault("help", "show program's version number and exit")
+        super().__init__(
+            option_strings, argparse.SUPPRESS, nargs=0, default=argparse.SUPPRESS, **kwargs
+        )
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        print(f"robotsim {version()}")
+        parser.exit()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``robotsim`` with its sub-commands (each configured only once
+    chosen: :class:`LazySubcommands`)."""
     parser = OneLineParser(
         prog="robotsim",
         description="Mobile-robot simulation and guaranteed-localisation testbed.",
     )
-    parser.add_argument("--version", action="version", version=f"robotsim {version()}")
+    parser.add_argument("--version", action=VersionAction)
     parser.add_argument(
         "--debug",
         action="store_true",
         help="on an internal failure print the full traceback (and any warnings) to stderr",
     )
+    parser.register("action", "parsers", LazySubcommands)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    run = sub.add_parser("run", help="run a scenario headless; write its recording and summary")
-    commands.add_run_arguments(run)
-    run.set_defaults(handler=commands.run)
-
-    replay = sub.add_parser("replay", help="run the localiser on a sensor log (no simulator)")
-    sensor_log.add_replay_arguments(replay)
-    replay.set_defaults(handler=sensor_log.replay_command)
-
-    listing = sub.add_parser("scenarios", help="list the built-in scenarios")
-    listing.set_defaults(handler=commands.list_scenarios)
-
-    campaign = sub.add_parser(
-        "campaign", help="run every scenario x seed x setting of a campaign file; one results table"
-    )
-    campaign_command.add_arguments(campaign)
-    campaign.set_defaults(handler=campaign_command.main)
-
-    report = sub.add_parser(
-        "report", help="aggregate a campaign's results per setting (confidence intervals, figures)"
-    )
-    report_command.add_arguments(report)
-    report.set_defaults(handler=report_command.main)
-
-    reproduce = sub.add_parser("reproduce", help="reproduce a paper's experiment")
-    rsub = reproduce.add_subparsers(dest="experiment", required=True, metavar="NAME")
-    for name, module in experiments().items():
-        p = rsub.add_parser(name, help=module.HELP, description=module.HELP)
-        module.add_arguments(p)
-        p.set_defaults(handler=module.main, check=commands.check_reproduce)
+    for name, command in COMMANDS.items():
+        sub.add_parser(name, help=command.help)
     return parser
 
 

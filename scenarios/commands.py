@@ -21,11 +21,14 @@ import sys
 import time
 import tomllib
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from scenarios import outputs
+from scenarios.catalog import DEFAULT_MAP, builtin_description, builtin_names
 from scenarios.errors import ScenarioError
-from scenarios.spec import DEFAULT_MAP, ScenarioSpec, builtin_names, load_scenario
+
+if TYPE_CHECKING:  # the simulator and the estimators are imported when a run starts
+    from scenarios.spec import ScenarioSpec
 
 #: Where ``robotsim run`` writes when no path is given.
 DEFAULT_RUNS_DIR = Path("runs")
@@ -94,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     """``robotsim run``: simulate, localise, summarise, record; returns the exit status."""
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
 
     if Path(args.scenario).is_dir():
         raise ScenarioError(args.scenario, None, "is a folder, not a scenario file")
@@ -248,7 +252,7 @@ def list_scenarios(args: argparse.Namespace) -> int:
     names = builtin_names()
     width = max(map(len, names))
     for name in names:
-        print(f"{name:<{width}}  {load_scenario(name).description}")
+        print(f"{name:<{width}}  {builtin_description(name)}")
     return 0
 
 

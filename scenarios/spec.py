@@ -87,18 +87,15 @@ from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
 from robotsim.simulation import KidnapEvent
 from robotsim.world import World
+from scenarios.catalog import BUILTIN_FOLDER, DEFAULT_MAP, builtin_names
 from scenarios.errors import ScenarioError
 from scenarios.feasibility import check_feasible
 from scenarios.tables import Table
 from validated_records import Bounds, bounded, choices, declared_bounds, validate_fields
 
-#: The built-in scenarios: one TOML file per built-in map, in ``scenarios/builtin/``.
-BUILTIN_FOLDER = resources.files("scenarios") / "builtin"
-
 DEFAULT_DURATION_S = 60.0
 DEFAULT_SEED = 0
 DEFAULT_RATE_HZ = 100.0
-DEFAULT_MAP = "hall"
 
 #: The most samples (``duration_s * rate_hz``) a run may have: ten million samples take
 #: about 10 GB of logs and hours of simulation; beyond, refused before anything runs.
@@ -331,12 +328,6 @@ class ScenarioSpec:
 # ---------------------------------------------------------------------------------------
 # Loading
 # ---------------------------------------------------------------------------------------
-def builtin_names() -> tuple[str, ...]:
-    """Names of the built-in scenarios (the TOML files of ``scenarios/builtin``)."""
-    files = BUILTIN_FOLDER.iterdir()
-    return tuple(sorted(f.name[: -len(".toml")] for f in files if f.name.endswith(".toml")))
-
-
 def load_scenario(name_or_path: str | Path) -> ScenarioSpec:
     """A built-in scenario by name, or a scenario file by path, validated."""
     text = str(name_or_path)
