@@ -1,4 +1,4 @@
-"""The compiled EKF path (localization.compiled_ekf) against the numpy EKF, its reference.
+"""The compiled EKF path (localization.compiled.ekf) against the numpy EKF, its reference.
 
 Each model is run twice through the same :class:`ExtendedKalmanFilter`: once with its
 per-point kernels (compiled path) and once as the same batched functions without the Jacobian
@@ -17,7 +17,8 @@ import numba
 import numpy as np
 import pytest
 
-from localization import compiled_ekf
+from localization.compiled import ekf as compiled_ekf
+from localization.compiled.motion import leading_entries_jacobian_point
 from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
@@ -26,7 +27,6 @@ from localization.motion_models import (
     MODELS,
     gps_jacobian,
     gps_model,
-    leading_entries_jacobian_point,
     pose_jacobian,
     pose_model,
 )
