@@ -146,7 +146,7 @@ def test_the_lean_filters_refuse_what_they_cannot_run():
     augmented = MODELS["CTRV"].process_model(np.eye(2) * 1e-2, ProcessNoise.AUGMENTED)
     with pytest.raises(EstimationError, match="built-in motion model"):
         LeanEKF(augmented, measurement, belief, DT_S)
-    with pytest.raises(EstimationError, match="4 states"):
+    with pytest.raises(EstimationError, match="5 states, the process model 4"):
         LeanUKF(UKF, CV.process_model(np.eye(4)), measurement, belief, DT_S)
     batch = Gaussian(np.stack([belief.mean] * 2), np.stack([belief.cov] * 2), (2,))
     with pytest.raises(EstimationError, match="one run"):
