@@ -24,7 +24,7 @@ with ``sym(M) = (M + M^T) / 2``. Kernel conventions (the per-point kernels of
 :mod:`localization.compiled.ukf`): ``f(x (n,), args (k,), out (n,))``,
 ``F(x (n,), args (k,), out (n, n))``, ``h(x (n,), args (k,), out (m,))``,
 ``H(x (n,), args (k,), out (m, n))``, with ``args`` the step's arguments packed as floats
-(:func:`localization.compiled.ukf.pack_args`).
+(:func:`localization.compiled.glue.pack_args`).
 
 Entries. The cores take the kernels as arguments and are called only from other compiled
 functions; the entries Python calls are module-level and cached on disk for the built-in
@@ -33,9 +33,8 @@ kernels (one prediction entry switches between the four motion models by their n
 pair of kernels (:func:`predict_entry`, :func:`update_entry`).
 
 Status codes, array conventions and the Python-side helpers are those of
-:mod:`localization.compiled.ukf`: :data:`~localization.compiled.ukf.OK`,
-:data:`~localization.compiled.ukf.NOT_POSITIVE_DEFINITE` (``S``) or
-:data:`~localization.compiled.ukf.NOT_FINITE` (an argument, ``z`` or a result); on anything but
+:mod:`localization.compiled.glue`: ``OK``, ``NOT_POSITIVE_DEFINITE`` (``S``) or ``NOT_FINITE``
+(an argument, ``z`` or a result); on anything but
 ``OK`` the caller runs the numpy step, which gives its own results, errors and warnings.
 Runs are independent and computed by the same code, so a batch gives its runs' one-by-one
 results bit for bit.

@@ -251,13 +251,10 @@ def pack(
     naming what the lean path cannot take. ``weights``: the predict and update
     :class:`~localization.sigma_points.SigmaWeights` (UKF) or ``None`` (EKF)."""
     augmented = process.noise == ProcessNoise.AUGMENTED
-    numbers = ukf.PREDICT_ENTRIES if weights is not None else ekf.PREDICT_ENTRIES
-    key = (
-        (process.point, augmented)
-        if weights is not None
-        else (process.point, process.jacobian_point)
-    )
-    found = numbers.get(key)
+    if weights is not None:
+        found = ukf.PREDICT_ENTRIES.get((process.point, augmented))
+    else:
+        found = ekf.PREDICT_ENTRIES.get((process.point, process.jacobian_point))
     if found is None or found[1] < 0 or (weights is None and augmented):
         raise EstimationError(
             f"{owner}: the process model must be a built-in motion model "

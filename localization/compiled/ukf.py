@@ -32,9 +32,8 @@ Per-point kernels. A model gives ``f(x (n,), args (k,), out (n,))`` (additive no
 ``f(x (n,), w (q,), args (k,), out (n,))`` (augmented noise) or ``h(x (n,), args (k,), out (m,))``,
 compiled with ``numba.njit``, writing its result into ``out``; ``x`` and ``w`` are scratch
 copies of the sigma point (a kernel may overwrite them). ``args`` are the step's extra
-arguments packed as floats (:func:`pack_args`): each argument flattened, in order. The
-kernels of the motion models live beside their numpy versions in
-:mod:`localization.motion_models`.
+arguments packed as floats (:func:`~localization.compiled.glue.pack_args`): each argument
+flattened, in order. The kernels of the motion models are :mod:`localization.compiled.motion`.
 
 Entries. The generic cores (:func:`predict_core`, :func:`update_core`) take the kernel as an
 argument, so they are only called from other compiled functions: numba then inlines the
@@ -44,11 +43,12 @@ prediction entry switches between the four motion models, so their first compila
 10 s per noise kind, happens together);
 for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
 compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
-file only; :mod:`localization.kernel_cache` drops the package's cache whenever a kernel source
-(:mod:`localization.motion_models` among them) changes.
+file only; :mod:`localization.kernel_cache` drops the folder's cache whenever any of its files
+changes. The lean entries of :mod:`localization.compiled.lean` call the built-in entries.
 
-Status. An entry returns :data:`OK`, :data:`NOT_POSITIVE_DEFINITE` (a covariance to factorise,
-``P`` or ``S``) or :data:`NOT_FINITE` (an argument or a result). On anything but ``OK`` the
+Status. An entry returns a status code of :mod:`localization.compiled.glue`: ``OK``,
+``NOT_POSITIVE_DEFINITE`` (a covariance to factorise, ``P`` or ``S``) or ``NOT_FINITE`` (an
+argument or a result). On anything but ``OK`` the
 caller discards the outputs and runs the numpy step, which applies the filter's
 :class:`~localization.linalg.PDPolicy` and raises the errors of the numpy path, word for word.
 
