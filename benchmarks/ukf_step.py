@@ -202,9 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     if failures:
         print("FAILED: " + "; ".join(failures), file=sys.stderr)
         return 1
-    print(
-        f"checked: lean, lean run and bare equal the filter step bit for bit ({args.steps} steps)"
-    )
+    print(f"checked: lean and lean run equal the filter step bit for bit ({args.steps} steps)")
     short = zs[: max(1, args.steps // 20)]
     batch_steps = zs[:5]
     numpy = numpy_models()

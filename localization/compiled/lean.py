@@ -51,6 +51,7 @@ _MODEL, _AUGMENTED, _N, _M, _K, _Q, _STATE_ANGLES, _MEASUREMENT_ANGLES = range(8
 _HEADER = 8
 #: consts entries before the step arguments: the predict and the update weights
 _WEIGHTS = 6
+_F64 = np.dtype(np.float64)
 
 #: State dimension of each built-in process kernel, by its number.
 STATE_DIMENSIONS = {
@@ -318,6 +319,8 @@ class _LeanFilter:
         self._cov = np.array(belief.cov, dtype=np.float64, order="C")
         self._consts, self._layout = consts, layout
         self._z_shape = (int(layout[_M]),)
+        # the entry and its fixed arguments as instance attributes: a step looks up nothing else
+        self._entry = self._step_entry
         self.mean = self._mean.view()
         """``(n,)`` the current mean, a read-only view (it changes with every step)."""
         self.mean.flags.writeable = False
@@ -354,9 +357,9 @@ class _LeanFilter:
         Raises:
             EstimationError: ``z`` of another shape, or a failed step (module docstring).
         """
-        if z.__class__ is not np.ndarray or z.shape != self._z_shape or z.dtype != np.float64:
+        if z.__class__ is not np.ndarray or z.dtype is not _F64 or z.shape != self._z_shape:
             z = self._measurements(z, 1)
-        status = self._step_entry(self._mean, self._cov, z, self._consts, self._layout)
+        status = self._entry(self._mean, self._cov, z, self._consts, self._layout)
         if status:
             raise self._failed(status, None)
 
