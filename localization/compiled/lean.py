@@ -138,16 +138,32 @@ def _accept(t, run_mean, run_cov, new_mean, new_cov, means_out, covs_out) -> Non
 
 
 @numba.njit(cache=True)
-def ukf_step(mean, cov, z, consts, layout) -> int:
-    """One UKF predict + update of ``mean (n,)``, ``cov (n, n)`` (overwritten on success) by
-    ``z (m,)``, with the constants of :func:`pack`; returns a status code."""
-    n, m = mean.shape[0], z.shape[0]
-    prior_mean, prior_cov = np.empty((1, n)), np.empty((1, n, n))
-    new_mean, new_cov = np.empty((1, n)), np.empty((1, n, n))
+def _work_views(work, n):
+    """The beliefs kept in a filter's work array ``(3 (n + n^2),)``: the state, the predicted
+    and the updated belief, each as ``mean (1, n)``, ``cov (1, n, n)``."""
+    size = n + n * n
+    views = []
+    for part in range(3):
+        start = part * size
+        views.append(
+            (
+                work[start : start + n].reshape((1, n)),
+                work[start + n : start + size].reshape((1, n, n)),
+            )
+        )
+    return views[0], views[1], views[2]
+
+
+@numba.njit(cache=True)
+def ukf_step(work, z, consts, layout) -> int:
+    """One UKF predict + update of the state held in ``work`` (:func:`_work_views`; overwritten
+    on success) by ``z (m,)``, with the constants of :func:`pack`; returns a status code. The
+    work array spares the step its allocations and an argument."""
+    (mean, cov), (prior_mean, prior_cov), (new_mean, new_cov) = _work_views(work, layout[_N])
     status = _ukf_once(
-        mean.reshape((1, n)),
-        cov.reshape((1, n, n)),
-        z.reshape((1, m)),
+        mean,
+        cov,
+        z.reshape((1, z.shape[0])),
         consts,
         layout,
         prior_mean,
@@ -156,21 +172,19 @@ def ukf_step(mean, cov, z, consts, layout) -> int:
         new_cov,
     )
     if status == OK:
-        mean[:] = new_mean[0]
-        cov[:] = new_cov[0]
+        mean[:] = new_mean
+        cov[:] = new_cov
     return status
 
 
 @numba.njit(cache=True)
-def ekf_step(mean, cov, z, consts, layout) -> int:
+def ekf_step(work, z, consts, layout) -> int:
     """As :func:`ukf_step` for the EKF."""
-    n, m = mean.shape[0], z.shape[0]
-    prior_mean, prior_cov = np.empty((1, n)), np.empty((1, n, n))
-    new_mean, new_cov = np.empty((1, n)), np.empty((1, n, n))
+    (mean, cov), (prior_mean, prior_cov), (new_mean, new_cov) = _work_views(work, layout[_N])
     status = _ekf_once(
-        mean.reshape((1, n)),
-        cov.reshape((1, n, n)),
-        z.reshape((1, m)),
+        mean,
+        cov,
+        z.reshape((1, z.shape[0])),
         consts,
         layout,
         prior_mean,
@@ -179,8 +193,8 @@ def ekf_step(mean, cov, z, consts, layout) -> int:
         new_cov,
     )
     if status == OK:
-        mean[:] = new_mean[0]
-        cov[:] = new_cov[0]
+        mean[:] = new_mean
+        cov[:] = new_cov
     return status
 
 
@@ -315,8 +329,12 @@ class _LeanFilter:
 
     def __init__(self, belief: Gaussian, consts: np.ndarray, layout: np.ndarray) -> None:
         self._angles = belief.angle_indices
-        self._mean = np.array(belief.mean, dtype=np.float64, order="C")
-        self._cov = np.array(belief.cov, dtype=np.float64, order="C")
+        n = belief.mean.shape[0]
+        self._work = np.zeros(3 * (n + n * n))  # the state, then scratch (_work_views)
+        self._mean = self._work[:n]
+        self._cov = self._work[n : n + n * n].reshape(n, n)
+        self._mean[:] = belief.mean
+        self._cov[:] = belief.cov
         self._consts, self._layout = consts, layout
         self._z_shape = (int(layout[_M]),)
         # the entry and its fixed arguments as instance attributes: a step looks up nothing else
@@ -359,7 +377,7 @@ class _LeanFilter:
         """
         if z.__class__ is not np.ndarray or z.dtype is not _F64 or z.shape != self._z_shape:
             z = self._measurements(z, 1)
-        status = self._entry(self._mean, self._cov, z, self._consts, self._layout)
+        status = self._entry(self._work, z, self._consts, self._layout)
         if status:
             raise self._failed(status, None)
 
