@@ -5,7 +5,7 @@
 Data: the sensor log of 600 s on ``hall`` (the default route of the simulator's tests, seed
 0). Figures, side by side in one run (best of ``--repeats``):
 
-- the compiled step (``localization.dead_reckoning_kernel``, one numba call per ``run()``
+- the compiled step (``localization.compiled.dead_reckoning``, one numba call per ``run()``
   stretch) for ``ukf``, ``iukf`` and ``ekf`` (``iekf`` runs the ``ekf`` code), the batch
   ``(2, 8)`` = the UKF-only and the fused branch on the same data, without fusion (one call
   for the whole run) and with the paper's clamp once a second (600 epochs, 601 calls: the

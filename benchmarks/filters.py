@@ -22,7 +22,9 @@ shows a user, with the model written for them, never our model functions:
 
 Ours runs on both of its paths: ``ukf``/``ekf`` the compiled paths (``CTRV.process_model(Q)``
 and ``pose_model(R)``, with their per-point kernels), ``ukf numpy``/``ekf numpy`` the numpy
-paths (the same functions without kernels); heading wrapped.
+paths (the same functions without kernels); heading wrapped. The lean entries
+(``LeanUKF``/``LeanEKF`` of ``localization.compiled.lean``, one ``step`` call per measurement,
+the state kept in place) join the one-filter figures and issue 17's one-filter target.
 
 Order of work: (1) equal estimates, before any timing: every peer must give ours (means and
 covariances after every update of ``--filterpy-runs`` runs, heading compared modulo 2 pi,
@@ -70,6 +72,7 @@ from filter_peers import (
 from scipy.linalg import lapack
 from textbook_ukf import textbook_ukf_run
 
+from localization.compiled.lean import LeanEKF, LeanUKF
 from localization.ekf import ExtendedKalmanFilter
 from localization.gaussian import Gaussian
 from localization.linalg import wrap_angle
@@ -175,6 +178,24 @@ def run_ours(
     return means, covs
 
 
+def run_lean(kind: str, z: np.ndarray, initial: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Our lean filter ``kind`` (``"ukf"``, ``"ekf"``: :mod:`localization.compiled.lean`) over
+    one run ``z (steps, 3)`` from ``initial (5,)``, one ``step`` call per measurement, the
+    beliefs recorded as :func:`run_ours` records them."""
+    process, measurement = our_models(compiled=True)
+    belief = Gaussian(initial, P0, angle_indices=(HEADING,))
+    if kind == "ukf":
+        lean = LeanUKF(ours()["ukf"][0], process, measurement, belief, DT_S)
+    else:
+        lean = LeanEKF(process, measurement, belief, DT_S)
+    steps = z.shape[0]
+    means, covs = np.empty((steps, 5)), np.empty((steps, 5, 5))
+    for k in range(steps):
+        lean.step(z[k])
+        means[k], covs[k] = lean.mean, lean.cov
+    return means, covs
+
+
 def unwrap_heading(z: np.ndarray, initial: np.ndarray) -> np.ndarray:
     """``z (..., steps, 3)`` with the heading made continuous along the steps, starting from
     the initial mean's heading: the measurements of the continuous-heading peers."""
@@ -232,6 +253,12 @@ LABELS = {
 }
 
 
+LEAN_LABELS = {
+    "ukf": "UKF (lean entry, `LeanUKF.step`)",
+    "ekf": "EKF (lean entry, `LeanEKF.step`)",
+}
+
+
 def ours() -> dict[str, tuple[object, bool]]:
     """Our filters by name: ``(filter, compiled models)``."""
     ukf = UnscentedKalmanFilter(ScaledSigmaPoints(ALPHA, BETA, KAPPA))
@@ -265,6 +292,11 @@ def check_equivalence(z: np.ndarray, initial: np.ndarray, runs: int) -> list[lis
         rows.append(
             _verdict(f"our {LABELS[kind]} vs our {LABELS[kind + ' numpy']} ({size})", paths)
         )
+    for kind in ("ukf", "ekf"):
+        lean = max(
+            _difference(run_lean(kind, z[r], initial[r]), single[kind][r]) for r in range(runs)
+        )
+        rows.append(_verdict(f"our {LEAN_LABELS[kind]} vs our {LABELS[kind]} ({size})", lean))
     for name, (filt, compiled) in filters.items():
         means, covs = run_ours(filt, z[:runs], initial[:runs], compiled)
         batch = max(_difference(single[name][r], (means[r], covs[r])) for r in range(runs))
@@ -329,6 +361,11 @@ def time_all(
     for name, (filt, compiled) in ours().items():
         figures[f"ours {name} single"] = (one_run(filt, compiled), steps)
         figures[f"ours {name} batched"] = (all_runs(filt, compiled), steps * z.shape[0])
+    for kind in LEAN_LABELS:
+        figures[f"ours {kind} lean single"] = (
+            lambda rep, kind=kind: run_lean(kind, z[rep % runs], initial[rep % runs]),
+            steps,
+        )
     for name in PEERS:
         figures[name] = (peer_run(name), steps)
     before = os.getloadavg()[0]
@@ -464,6 +501,13 @@ def speed_tables(us: dict[str, tuple[float, float]], runs: int) -> tuple[str, st
                 *(f"{t:.2f}" for t in us[f"ours {name} batched"]),
             ]
         )
+    times += [
+        [
+            f"our {LEAN_LABELS[kind]}, one filter",
+            *(f"{t:.2f}" for t in us[f"ours {kind} lean single"]),
+        ]
+        for kind in LEAN_LABELS
+    ]
     times += [[PEER_LABELS[name], *(f"{t:.1f}" for t in us[name])] for name in PEERS]
     ratios = []
     for name, (kind, _, _) in PEERS.items():
@@ -478,12 +522,19 @@ def speed_tables(us: dict[str, tuple[float, float]], runs: int) -> tuple[str, st
     fastest = min(("filterpy ukf wrapped", "filterpy ukf continuous"), key=lambda n: us[n][0])
     targets = []
     for issue, single_target, batch_target in (("7", 8.0, 50.0), ("17", 40.0, 150.0)):
-        for how, target in (("single", single_target), ("batched", batch_target)):
+        hows = [("single", single_target), ("batched", batch_target)]
+        if issue == "17":
+            hows.insert(1, ("lean single", single_target))
+        for how, target in hows:
             ratio = us[fastest][0] / us[f"ours ukf {how}"][0]
-            what = "one filter" if how == "single" else f"{runs} runs batched, per run-step"
+            what = {
+                "single": "UKF (compiled path), one filter",
+                "lean single": "UKF (lean entry), one filter",
+                "batched": f"UKF (compiled path), {runs} runs batched, per run-step",
+            }[how]
             targets.append(
                 [
-                    f"issue {issue}: our UKF (compiled path), {what}",
+                    f"issue {issue}: our {what}",
                     f">= {target:g}x",
                     f"{ratio:.1f}x",
                     "met" if ratio >= target else "MISSED",

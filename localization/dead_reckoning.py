@@ -75,7 +75,7 @@ per-sample standard deviation ``density * sqrt(rate_hz)`` (docs/models.md sectio
 Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), step by step, take
 190-380 us a step for the batch of two branches (``ekf`` .. ``iukf``; 16 s for 600 s of ``ukf``
 at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning` therefore
-runs a compiled step specialised to this model (:mod:`localization.dead_reckoning_kernel`,
+runs a compiled step specialised to this model (:mod:`localization.compiled.dead_reckoning`,
 numba), still the same filter: the unscented prediction with the same sigma points and moments
 as the generic one (or the EKF prediction), and the closed-form update that equals the
 unscented one for the linear ``h`` (``tests/localization/test_dead_reckoning.py`` checks it
@@ -100,16 +100,14 @@ from enum import StrEnum
 
 import numpy as np
 
-from localization.dead_reckoning_kernel import (
-    B_ACCEL,
+from localization.compiled import dead_reckoning as kernel
+from localization.compiled.dead_reckoning import (
     B_GYRO,
     D_WHEEL,
     N_STATES,
     OMEGA,
     THETA,
     V,
-    X,
-    Y,
     run_steps,
 )
 from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
@@ -279,38 +277,25 @@ def initial_belief(
 
 def transition(state: np.ndarray, accel_m_s2, dt_s: float) -> np.ndarray:
     """``f(s) (..., 8)``: one step of ``dt_s`` with the forward accelerometer input
-    ``accel_m_s2`` (broadcast against ``state[..., 0]``); see the module docstring."""
-    theta, v, omega = state[..., THETA], state[..., V], state[..., OMEGA]
-    heading = theta + 0.5 * dt_s * omega
-    out = state.copy()
-    out[..., X] += dt_s * v * np.cos(heading)
-    out[..., Y] += dt_s * v * np.sin(heading)
-    out[..., THETA] += dt_s * omega
-    out[..., V] += dt_s * (accel_m_s2 - state[..., B_ACCEL])
-    return out
+    ``accel_m_s2`` (broadcast against ``state[..., 0]``); see the module docstring (the kernel
+    :func:`localization.compiled.dead_reckoning.transition` per state)."""
+    state = np.asarray(state, dtype=float)
+    shape = np.broadcast_shapes(state.shape[:-1], np.shape(accel_m_s2))
+    rows = np.array(np.broadcast_to(state, shape + (N_STATES,)), order="C").reshape(-1, N_STATES)
+    accel = np.array(np.broadcast_to(accel_m_s2, shape), dtype=np.float64, order="C").reshape(-1)
+    out = np.empty_like(rows)
+    kernel.transition_rows(rows, accel, float(dt_s), out)
+    return out.reshape(shape + (N_STATES,))
 
 
 def transition_jacobian(state: np.ndarray, accel_m_s2, dt_s: float) -> np.ndarray:
-    """``df/ds (..., 8, 8)``."""
-    theta, v, omega = state[..., THETA], state[..., V], state[..., OMEGA]
-    heading = theta + 0.5 * dt_s * omega
-    cos, sin = dt_s * np.cos(heading), dt_s * np.sin(heading)
-    jac = np.broadcast_to(_linear_part(dt_s), state.shape[:-1] + (N_STATES, N_STATES)).copy()
-    jac[..., X, THETA] = -v * sin
-    jac[..., X, V] = cos
-    jac[..., X, OMEGA] = -0.5 * dt_s * v * sin
-    jac[..., Y, THETA] = v * cos
-    jac[..., Y, V] = sin
-    jac[..., Y, OMEGA] = 0.5 * dt_s * v * cos
-    return jac
-
-
-def _linear_part(dt_s: float) -> np.ndarray:
-    """``A (8, 8)``: the transition without the ``x, y`` motion (identity on ``x, y``)."""
-    a = np.eye(N_STATES)
-    a[THETA, OMEGA] = dt_s
-    a[V, B_ACCEL] = -dt_s
-    return a
+    """``df/ds (..., 8, 8)`` (:func:`localization.compiled.dead_reckoning.transition_jacobian`
+    per state; ``accel_m_s2`` does not enter it)."""
+    state = np.asarray(state, dtype=float)
+    rows = np.array(state, dtype=np.float64, order="C").reshape(-1, N_STATES)
+    out = np.empty((rows.shape[0], N_STATES, N_STATES))
+    kernel.jacobian_rows(rows, float(dt_s), out)
+    return out.reshape(state.shape[:-1] + (N_STATES, N_STATES))
 
 
 def measurement_matrix(regressor: np.ndarray, wheel_base_m: float) -> np.ndarray:
@@ -462,7 +447,7 @@ class StepEngine(StrEnum):
     """How the dead-reckoning steps run."""
 
     COMPILED = "compiled"
-    """The step specialised to this model (:mod:`localization.dead_reckoning_kernel`)."""
+    """The step specialised to this model (:mod:`localization.compiled.dead_reckoning`)."""
     GENERIC = "generic"
     """The generic filter classes step by step: the reference, about a hundred times slower."""
 
@@ -732,7 +717,7 @@ def _grown(values: np.ndarray, capacity: int) -> np.ndarray:
 
 
 class _CompiledStep:
-    """The arguments of :func:`~localization.dead_reckoning_kernel.run_steps` that stay fixed
+    """The arguments of :func:`~localization.compiled.dead_reckoning.run_steps` that stay fixed
     over a run (contiguous float64 arrays, one compiled signature), and the checks around it.
 
     The unscented filters pass their sigma points' ``gamma``, ``W_i = 1 / (2 gamma^2)`` and

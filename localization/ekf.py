@@ -22,7 +22,7 @@ Two paths. When a model carries per-point kernels of its function and of its Jac
 (``point=`` and ``jacobian_point=``, e.g. the models built by ``CTRV.process_model(Q)``,
 :func:`~localization.motion_models.pose_model`), has additive noise, and the step can be
 expressed there (a flat batch or one run, arguments that are numbers), the EKF's predict and
-update and the IEKF's predict run compiled (:mod:`localization.compiled_ekf`: one call per step,
+update and the IEKF's predict run compiled (:mod:`localization.compiled.ekf`: one call per step,
 the same maths, equal to rounding; about ten times faster for one CTRV filter). Otherwise, and
 whenever the compiled step declines (non-finite input or result, ``S`` not positive definite),
 the numpy path below takes the step; it is the reference and raises the errors. The IEKF's
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from localization import compiled_ekf
+from localization.compiled import ekf as compiled_ekf
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import ConvergenceWarning, require_finite, wrap_columns

@@ -6,10 +6,10 @@ one sonar scan and, when the robot has moved enough since the last filter update
 (``update_min_d`` / ``update_min_a``, as ``amcl``):
 
 1. moves every particle by the odometry increment with the sampled odometry motion model
-   (``alpha1..alpha4``; PR table 5.6, :func:`localization.mcl_kernels.sample_motion_odometry`);
+   (``alpha1..alpha4``; PR table 5.6, :func:`localization.compiled.mcl.sample_motion_odometry`);
 2. weights it by the beam model mixture ``z_hit, z_short, z_max, z_rand`` with
    ``sigma_hit`` and ``lambda_short`` on the scan, against the ranges it expects
-   (:func:`localization.mcl_kernels.beam_log_likelihoods`; no-echo readings count as
+   (:func:`localization.compiled.mcl.beam_log_likelihoods`; no-echo readings count as
    max-range readings);
 3. tracks the short- and long-term average likelihood ``w_fast``, ``w_slow``
    (``recovery_alpha_fast/slow``, PR table 8.3) and resamples every ``resample_interval``
@@ -19,7 +19,7 @@ one sonar scan and, when the robot has moved enough since the last filter update
    (``kld_err``, ``kld_z``, ``min_particles``..``max_particles``, histogram cells
    ``kld_bin_*``; Fox 2003).
 
-References and kernel details: :mod:`localization.mcl_kernels` ("PR": Thrun, Burgard, Fox,
+References and kernel details: :mod:`localization.compiled.mcl` ("PR": Thrun, Burgard, Fox,
 *Probabilistic Robotics*). Global localisation (:meth:`MonteCarloLocalization.global_localization`)
 spreads ``max_particles`` uniformly over the free space with uniform headings, as
 ``amcl``'s ``global_localization`` service.
@@ -58,7 +58,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from localization import mcl_kernels
+from localization.compiled import mcl as mcl_kernels
 from localization.errors import EstimationError
 from localization.linalg import wrap_angle
 from validated_records import bounded, validate_fields

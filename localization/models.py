@@ -16,7 +16,7 @@ shape ``(B,)`` is per-run and gets a sigma axis after them (``(B,)`` -> ``(B, 1)
 
 A model may also carry a per-point kernel (``point=``): the same function for ONE sigma point,
 compiled with ``numba.njit``, which lets the UKF take its compiled path
-(:mod:`localization.compiled_ukf`, about 30 times faster for one filter):
+(:mod:`localization.compiled.ukf`, about 30 times faster for one filter):
 
 - ``f(x (n,), args (k,), out (n,))`` (additive) or ``f(x (n,), w (q,), args (k,), out (n,))``
   (augmented), ``h(x (n,), args (k,), out (m,))``: the result is written into ``out``;
@@ -24,7 +24,7 @@ compiled with ``numba.njit``, which lets the UKF take its compiled path
   arrays give their run's entries); ``x`` and ``w`` are scratch copies the kernel may overwrite.
 
 With a per-point Jacobian kernel as well (``jacobian_point=``, used together with ``point`` and
-``jacobian``; additive noise), the EKF takes its compiled path (:mod:`localization.compiled_ekf`):
+``jacobian``; additive noise), the EKF takes its compiled path (:mod:`localization.compiled.ekf`):
 
 - ``F(x (n,), args (k,), out (n, n))``, ``H(x (n,), args (k,), out (m, n))``: every entry of
   ``out`` written.

@@ -57,13 +57,14 @@ ramp over the step: the state is propagated with the quantity at its mid-step va
 ``q + e/2`` and ends at ``q + e`` (exact for CV and for the speed rows, second order
 otherwise). This is the noise augmentation of the UKF (state augmented by ``e``).
 
-Per-point kernels (numba, for the compiled UKF of :mod:`localization.compiled_ukf` and the
-compiled EKF of :mod:`localization.compiled_ekf`): each transition also exists as
-``*_point(x (n,), args (1,) = (dt_s,), out (n,))``, noise augmented as
-``*_noisy_point(x, e (2,), args, out)``, and its Jacobian as
-``*_jacobian_point(x, args, out (n, n))``, written with the same formulas in the same
-order as the batched version (equal to rounding; tested). :meth:`MotionModel.process_model`,
-:func:`gps_model` and :func:`pose_model` build models that carry them.
+One source per formula. Each transition, its noise-augmented form and its Jacobian are
+written once, as a per-point numba kernel in :mod:`localization.compiled.motion`
+(``*_point(x (n,), args (1,) = (dt_s,), out (n,))``, ``*_noisy_point(x, e (2,), args, out)``,
+``*_jacobian_point(x, args, out (n, n))``); the batched functions here run those kernels over
+the rows of a batch, so a batched result is its states' per-point results bit for bit, and the
+compiled UKF and EKF inline the same kernels. :meth:`MotionModel.process_model`,
+:func:`gps_model` and :func:`pose_model` build models that carry them. The independent checks
+of the formulas (finite differences, quadrature, closed-form limits) are the tests.
 """
 
 from __future__ import annotations
@@ -72,83 +73,16 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from localization.compiled_linalg import wrap_angle as wrap_angle_scalar
+from localization.compiled import motion as kernels
 from localization.errors import EstimationError
-from localization.linalg import wrap_angle
 from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 
 Array = np.ndarray
 """A float array; shapes are given in the docstrings."""
 Transition = Callable[..., np.ndarray]
 """A batched model function ``(x (..., n), *args) -> (..., n)`` or its Jacobian ``(..., n, n)``."""
-
-#: Below this ``|u|`` the moments ``M_1^s`` and ``M_2^s`` use their Taylor series (their
-#: closed forms cancel to ``u^2``); above it the closed forms lose at most 1e-13 relative.
-_SERIES_BELOW = 0.1
-
-
-def _sin_moment_series(order: int, terms: int = 5) -> tuple[float, ...]:
-    """Taylor coefficients of ``M_k^s(u) / u`` in powers of ``u^2`` (truncation < 1e-18 at 0.1)."""
-    return tuple(
-        (-1.0) ** j / (math.factorial(2 * j + 1) * (2 * j + order + 2)) for j in range(terms)
-    )
-
-
-_M1S_OVER_U = _sin_moment_series(1)  # 1/3 - u^2/30 + ...
-_M2S_OVER_U = _sin_moment_series(2)  # 1/4 - u^2/36 + ...
-
-
-def _horner(u2: Array, coefficients: tuple[float, ...]) -> Array:
-    """``sum_j coefficients[j] u2^j``, evaluated by Horner's rule."""
-    acc: Array = np.asarray(coefficients[-1])
-    for c in coefficients[-2::-1]:
-        acc = acc * u2 + c
-    return acc
-
-
-def trig_moments(u: Array, max_order: int = 2) -> tuple[list[Array], list[Array]]:
-    """``M_k^c(u) = int_0^1 t^k cos(u t) dt`` and ``M_k^s(u) = int_0^1 t^k sin(u t) dt``.
-
-    Returns two lists indexed by ``k = 0..max_order`` (``max_order <= 2``), each entry shaped
-    like ``u``. ``dM_k^c/du = -M_(k+1)^s`` and ``dM_k^s/du = M_(k+1)^c``. Safe at ``u = 0``
-    (no division by a small number, no warning), written without cancellation where a
-    half-angle form exists::
-
-        M_0^c = sinc(u),  M_0^s = (1 - cos u)/u = sin(u/2) sinc(u/2)
-        M_1^c = (sin u - M_0^s)/u = sinc(u) - sinc(u/2)^2 / 2
-        M_1^s = (M_0^c - cos u)/u          (Taylor series below |u| = 0.1)
-        M_2^c = (sin u - 2 M_1^s)/u = sinc(u) - 2 M_1^s/u
-        M_2^s = (2 M_1^c - cos u)/u        (Taylor series below |u| = 0.1)
-
-    with ``sinc(z) = sin(z)/z`` (integration by parts gives the recurrences).
-    """
-    u = np.asarray(u, dtype=float)
-    # u = 0 is replaced by a tiny non-zero value: sin(z)/z is then exactly 1 and M_0^s ~ 1e-300
-    u_nz = np.where(u == 0.0, 1e-300, u)
-    half = 0.5 * u_nz
-    sin_h = np.sin(half)
-    sinc_u = np.sin(u_nz) / u_nz
-    sinc_h = sin_h / half
-    cos_moments = [sinc_u]
-    sin_moments = [sin_h * sinc_h]
-    if max_order >= 1:
-        small = np.abs(u) < _SERIES_BELOW
-        u2 = u * u
-        u2_safe = np.where(small, 1.0, u2)
-        cos_u = np.cos(u)
-        m1s_over_u = np.where(small, _horner(u2, _M1S_OVER_U), (sinc_u - cos_u) / u2_safe)
-        cos_moments.append(sinc_u - 0.5 * sinc_h * sinc_h)
-        sin_moments.append(u * m1s_over_u)
-    if max_order >= 2:
-        cos_moments.append(sinc_u - 2.0 * m1s_over_u)
-        m2s_over_u = np.where(
-            small, _horner(u2, _M2S_OVER_U), (2.0 * cos_moments[1] - cos_u) / u2_safe
-        )
-        sin_moments.append(u * m2s_over_u)
-    return cos_moments, sin_moments
 
 
 def _check_state(x: Array, n: int, model: str) -> Array:
@@ -158,190 +92,79 @@ def _check_state(x: Array, n: int, model: str) -> Array:
     return x
 
 
-def _rotate(theta: Array, forward: Array, left: Array) -> tuple[Array, Array]:
-    """World-frame components of a vector given in the frame of heading ``theta``."""
-    c, s = np.cos(theta), np.sin(theta)
-    return c * forward - s * left, s * forward + c * left
+def _as_rows(values: Array, shape: tuple[int, ...], width: int) -> Array:
+    """``values`` broadcast to ``shape + (width,)`` as a fresh C-contiguous float array ``(N, width)``."""
+    return np.array(np.broadcast_to(values, shape + (width,)), dtype=np.float64, order="C").reshape(
+        -1, width
+    )
 
 
-def _identity(x: Array, n: int) -> Array:
-    return np.broadcast_to(np.eye(n), x.shape[:-1] + (n, n)).copy()
-
-
-# --------------------------------------------------------------------------------------- CV
-
-
-def cv_transition(x: Array, dt_s: float | Array) -> Array:
-    """CV, paper 001 eq. 3: ``x + vx dt``, ``y + vy dt``; state ``(x, y, vx, vy)``."""
-    x = _check_state(x, 4, "CV")
-    out = x.copy()
-    out[..., 0] = x[..., 0] + x[..., 2] * dt_s
-    out[..., 1] = x[..., 1] + x[..., 3] * dt_s
-    return out
-
-
-def cv_jacobian(x: Array, dt_s: float | Array) -> Array:
-    """Jacobian ``(..., 4, 4)`` of :func:`cv_transition`."""
-    x = _check_state(x, 4, "CV")
-    jac = _identity(x, 4)
-    jac[..., 0, 2] = dt_s
-    jac[..., 1, 3] = dt_s
-    return jac
-
-
-# ------------------------------------------------------------------------------ CTRV / CTRA
-
-
-def _ctra_parts(x: Array, dt_s: float | Array, accel: Array | None, omega: Array, jacobian: bool):
-    """Shared terms of CTRV (``accel`` None) and CTRA: the local displacement and the moments.
-
-    The displacement in the frame of the initial heading (eq. 5, 8-9 rewritten) is
-    ``int_0^T (v + a t) (cos, sin)(omega t) dt = v T (M0c, M0s) + a T^2 (M1c, M1s)``;
-    a Jacobian needs one order of moments more (``d/du M_k = (-M_(k+1)^s, M_(k+1)^c)``).
-    """
-    theta, v = x[..., 2], x[..., 3]
+def _rows(x: Array, n: int, model: str, dt_s: float | Array, noise: Array | None = None):
+    """``(batch shape, x rows (N, n), dt rows (N,), noise rows (N, 2) or None)``: ``x (..., n)``,
+    ``dt_s`` and the noise increments ``(..., 2)`` broadcast against each other's batch axes."""
+    x = _check_state(x, n, model)
     dt = np.asarray(dt_s, dtype=float)
-    u = omega * dt  # turned angle (rad)
-    mc, ms = trig_moments(u, max_order=int(accel is not None) + int(jacobian))
-    forward = v * dt * mc[0]
-    left = v * dt * ms[0]
-    if accel is not None:
-        forward = forward + accel * dt**2 * mc[1]
-        left = left + accel * dt**2 * ms[1]
-    return theta, v, dt, u, mc, ms, forward, left
+    batches = [x.shape[:-1], dt.shape]
+    if noise is not None:
+        noise = np.asarray(noise, dtype=float)
+        batches.append(noise.shape[:-1])
+    shape = np.broadcast_shapes(*batches)
+    noise_rows = None if noise is None else _as_rows(noise, shape, noise.shape[-1])
+    return shape, _as_rows(x, shape, n), _as_rows(dt[..., None], shape, 1)[:, 0], noise_rows
 
 
-def _ctra_like_transition(x: Array, dt_s, accel: Array | None, omega: Array) -> Array:
-    theta, v, dt, u, _, _, forward, left = _ctra_parts(x, dt_s, accel, omega, jacobian=False)
-    dx, dy = _rotate(theta, forward, left)
-    out = x.copy()
-    out[..., 0] = x[..., 0] + dx
-    out[..., 1] = x[..., 1] + dy
-    out[..., 2] = wrap_angle(theta + u)
-    if accel is not None:
-        out[..., 3] = v + accel * dt
-    return out
+def _batched(name: str, n: int) -> tuple[Transition, Transition]:
+    """The batched transition and Jacobian of the built-in model ``name`` with ``n`` states:
+    the kernels of :mod:`localization.compiled.motion` run over the rows of the batch."""
+    number = kernels.MODEL_NUMBERS[name]
+
+    def transition(x: Array, dt_s: float | Array) -> Array:
+        shape, rows, dts, _ = _rows(x, n, name, dt_s)
+        out = np.empty_like(rows)
+        kernels.transition_rows(number, rows, dts, out)
+        return out.reshape(shape + (n,))
+
+    def jacobian(x: Array, dt_s: float | Array) -> Array:
+        shape, rows, dts, _ = _rows(x, n, name, dt_s)
+        out = np.empty((rows.shape[0], n, n))
+        kernels.jacobian_rows(number, rows, dts, out)
+        return out.reshape(shape + (n, n))
+
+    return transition, jacobian
 
 
-def _ctra_like_jacobian(x: Array, dt_s, accel: Array | None, omega: Array, i_omega: int) -> Array:
-    """Jacobian of CTRV/CTRA; the acceleration (CTRA) sits at index 4."""
-    theta, v, dt, _, mc, ms, forward, left = _ctra_parts(x, dt_s, accel, omega, jacobian=True)
-    jac = _identity(x, x.shape[-1])
-    dx, dy = _rotate(theta, forward, left)
-    jac[..., 0, 2], jac[..., 1, 2] = -dy, dx
-    jac[..., 0, 3], jac[..., 1, 3] = _rotate(theta, dt * mc[0], dt * ms[0])
-    # d/domega of (M_k^c, M_k^s)(omega T) = T (-M_(k+1)^s, M_(k+1)^c)
-    d_forward = -dt * dt * v * ms[1]
-    d_left = dt * dt * v * mc[1]
-    if accel is not None:
-        d_forward = d_forward - dt**3 * accel * ms[2]
-        d_left = d_left + dt**3 * accel * mc[2]
-        jac[..., 0, 4], jac[..., 1, 4] = _rotate(theta, dt**2 * mc[1], dt**2 * ms[1])
-        jac[..., 3, 4] = dt
-    jac[..., 0, i_omega], jac[..., 1, i_omega] = _rotate(theta, d_forward, d_left)
-    jac[..., 2, i_omega] = dt
-    return jac
+def trig_moments(u: Array, max_order: int = 2) -> tuple[list[Array], list[Array]]:
+    """``M_k^c(u) = int_0^1 t^k cos(u t) dt`` and ``M_k^s(u) = int_0^1 t^k sin(u t) dt``.
 
-
-def _along_arc(x: Array, theta: Array, length: Array, turn: Array) -> Array:
-    """``x`` with its position moved along a circular arc and its heading turned (wrapped).
-
-    The arc starts at heading ``theta``, has the signed ``length`` (m) and turns by ``turn``
-    (rad). Its displacement ``length (M_0^c, M_0^s)(turn)`` in the frame of ``theta`` is the
-    chord, ``(M_0^c, M_0^s)(u) = sinc(u/2) (cos, sin)(u/2)``, so in the world frame it is
-    ``length sinc(turn/2) (cos, sin)(theta + turn/2)``: half the numpy calls of the moment
-    form (which the Jacobians keep), equal to it to rounding (1 ulp of the position).
-    ``sinc(h) = sin(a)/a`` with ``a = hypot(h, 1e-300)``, which is ``|h|`` unless ``|h|`` is
-    below about 1e-290, where the ratio is exactly 1 anyway (``sinc`` is even): no turn
-    needs no branch and gives the straight line bit for bit.
+    Returns two lists indexed by ``k = 0..max_order`` (``max_order <= 2``), each entry shaped
+    like ``u``; the formulas are those of :func:`localization.compiled.motion.trig_moments_point`
+    (run over the entries of ``u``).
     """
-    half = 0.5 * turn
-    a = np.hypot(half, 1e-300)
-    chord = np.sin(a)
-    chord /= a
-    chord *= length  # the chord length (m)
-    direction = theta + half
-    out = x.copy()
-    np.add(x[..., 0], chord * np.cos(direction), out=out[..., 0])
-    np.add(x[..., 1], chord * np.sin(direction), out=out[..., 1])
-    out[..., 2] = wrap_angle(theta + turn)
-    return out
+    u = np.asarray(u, dtype=float)
+    flat = np.array(u, dtype=np.float64, order="C").reshape(-1)
+    out = np.empty((flat.shape[0], 6))
+    kernels.trig_moment_rows(flat, out)
+    moments = [out[:, k].reshape(u.shape) for k in range(6)]
+    return moments[: max_order + 1], moments[3 : 4 + max_order]
 
 
-def ctrv_transition(x: Array, dt_s: float | Array) -> Array:
-    """CTRV, paper 001 eq. 5 (corrected); state ``(x, y, theta, v, omega)``.
-
-    An arc of length ``v T`` turning by ``omega T`` (:func:`_along_arc`).
-    """
-    x = _check_state(x, 5, "CTRV")
-    dt = dt_s if isinstance(dt_s, float) else np.asarray(dt_s, dtype=float)
-    return _along_arc(x, x[..., 2], x[..., 3] * dt, x[..., 4] * dt)
-
-
-def ctrv_jacobian(x: Array, dt_s: float | Array) -> Array:
-    """Jacobian ``(..., 5, 5)`` of :func:`ctrv_transition`."""
-    x = _check_state(x, 5, "CTRV")
-    return _ctra_like_jacobian(x, dt_s, None, x[..., 4], 4)
-
-
-def ctra_transition(x: Array, dt_s: float | Array) -> Array:
-    """CTRA, paper 001 eq. 7-9; state ``(x, y, theta, v, a, omega)``."""
-    x = _check_state(x, 6, "CTRA")
-    return _ctra_like_transition(x, dt_s, x[..., 4], x[..., 5])
-
-
-def ctra_jacobian(x: Array, dt_s: float | Array) -> Array:
-    """Jacobian ``(..., 6, 6)`` of :func:`ctra_transition`."""
-    x = _check_state(x, 6, "CTRA")
-    return _ctra_like_jacobian(x, dt_s, x[..., 4], x[..., 5], 5)
-
-
-# -------------------------------------------------------------------------------------- CCA
-
-
-def _cca_parts(x: Array, dt_s: float | Array, jacobian: bool):
-    theta, v, a, c = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-    dt = np.asarray(dt_s, dtype=float)
-    s = v * dt + 0.5 * a * dt**2  # arc length (m), signed
-    u = c * s  # turned angle (rad)
-    mc, ms = trig_moments(u, max_order=int(jacobian))
-    return theta, v, a, c, dt, s, u, mc, ms
-
-
-def cca_transition(x: Array, dt_s: float | Array) -> Array:
-    """CCA (constant curvature and acceleration), re-derived closed form of paper 001 eq. 17.
-
-    State ``(x, y, theta, v, a, c)``. With ``s = v T + a T^2 / 2``:
-    ``(x, y) += R(theta) s (M_0^c(c s), M_0^s(c s))`` (a circular arc of length ``s``,
-    evaluated as its chord by :func:`_along_arc`), ``theta += c s``, ``v += a T``; ``a`` and
-    ``c`` are constant.
-    """
-    x = _check_state(x, 6, "CCA")
-    theta, v, a, c = x[..., 2], x[..., 3], x[..., 4], x[..., 5]
-    dt = np.asarray(dt_s, dtype=float)
-    s = v * dt + 0.5 * a * dt**2  # arc length (m), signed, as in _cca_parts
-    out = _along_arc(x, theta, s, c * s)
-    out[..., 3] = v + a * dt
-    return out
-
-
-def cca_jacobian(x: Array, dt_s: float | Array) -> Array:
-    """Jacobian ``(..., 6, 6)`` of :func:`cca_transition`."""
-    x = _check_state(x, 6, "CCA")
-    theta, _, _, c, dt, s, u, mc, ms = _cca_parts(x, dt_s, jacobian=True)
-    jac = _identity(x, 6)
-    dx, dy = _rotate(theta, s * mc[0], s * ms[0])
-    jac[..., 0, 2], jac[..., 1, 2] = -dy, dx
-    # d(local)/ds = (cos u, sin u): the tangent at the end of the arc
-    tx, ty = _rotate(theta, np.cos(u), np.sin(u))
-    jac[..., 0, 3], jac[..., 1, 3] = tx * dt, ty * dt
-    jac[..., 0, 4], jac[..., 1, 4] = tx * 0.5 * dt**2, ty * 0.5 * dt**2
-    jac[..., 0, 5], jac[..., 1, 5] = _rotate(theta, -s * s * ms[1], s * s * mc[1])
-    jac[..., 2, 3] = c * dt
-    jac[..., 2, 4] = 0.5 * c * dt**2
-    jac[..., 2, 5] = s
-    jac[..., 3, 4] = dt
-    return jac
+cv_transition, cv_jacobian = _batched("CV", 4)
+cv_transition.__doc__ = """CV, paper 001 eq. 3: ``x (..., 4) = (x, y, vx, vy)`` over ``dt_s`` -> ``(..., 4)``
+(:func:`localization.compiled.motion.cv_point` per state)."""
+cv_jacobian.__doc__ = """Jacobian ``(..., 4, 4)`` of :func:`cv_transition`."""
+ctrv_transition, ctrv_jacobian = _batched("CTRV", 5)
+ctrv_transition.__doc__ = """CTRV, paper 001 eq. 5 (corrected): ``x (..., 5) = (x, y, theta, v, omega)``
+over ``dt_s`` -> ``(..., 5)`` (:func:`localization.compiled.motion.ctrv_point` per state)."""
+ctrv_jacobian.__doc__ = """Jacobian ``(..., 5, 5)`` of :func:`ctrv_transition`."""
+ctra_transition, ctra_jacobian = _batched("CTRA", 6)
+ctra_transition.__doc__ = """CTRA, paper 001 eq. 7-9: ``x (..., 6) = (x, y, theta, v, a, omega)`` over
+``dt_s`` -> ``(..., 6)`` (:func:`localization.compiled.motion.ctra_point` per state)."""
+ctra_jacobian.__doc__ = """Jacobian ``(..., 6, 6)`` of :func:`ctra_transition`."""
+cca_transition, cca_jacobian = _batched("CCA", 6)
+cca_transition.__doc__ = """CCA, the re-derived closed form of paper 001 eq. 17: ``x (..., 6) = (x, y,
+theta, v, a, c)`` over ``dt_s`` -> ``(..., 6)`` (:func:`localization.compiled.motion.cca_point`
+per state)."""
+cca_jacobian.__doc__ = """Jacobian ``(..., 6, 6)`` of :func:`cca_transition`."""
 
 
 def cca_transition_numerical(x: Array, dt_s: float | Array, nodes: int = 24) -> Array:
@@ -451,248 +274,14 @@ def cca_odometry_jacobian(x: Array) -> Array:
     return jac
 
 
-# ------------------------------------------------------------------ per-point kernels (numba)
-# One sigma point per call, for localization.compiled_ukf: the formulas of the batched
-# functions above, in the same order of operations.
-
-
-@numba.njit(cache=True)
-def _along_arc_point(x, theta, length, turn, out) -> None:
-    """:func:`_along_arc` for one state ``x (n,)`` into ``out (n,)``."""
-    out[:] = x
-    half = 0.5 * turn
-    a = math.hypot(half, 1e-300)
-    chord = math.sin(a) / a * length
-    direction = theta + half
-    out[0] = x[0] + chord * math.cos(direction)
-    out[1] = x[1] + chord * math.sin(direction)
-    out[2] = wrap_angle_scalar(theta + turn)
-
-
-@numba.njit(cache=True)
-def cv_point(x, args, out) -> None:
-    """:func:`cv_transition` of one state ``x (4,)``, ``args = (dt_s,)``, into ``out (4,)``."""
-    dt = args[0]
-    out[:] = x
-    out[0] = x[0] + x[2] * dt
-    out[1] = x[1] + x[3] * dt
-
-
-@numba.njit(cache=True)
-def ctrv_point(x, args, out) -> None:
-    """:func:`ctrv_transition` of one state ``x (5,)``, ``args = (dt_s,)``, into ``out (5,)``."""
-    dt = args[0]
-    _along_arc_point(x, x[2], x[3] * dt, x[4] * dt, out)
-
-
-@numba.njit(cache=True)
-def ctra_point(x, args, out) -> None:
-    """:func:`ctra_transition` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6,)``
-    (the moments of :func:`trig_moments` for one turned angle ``u``)."""
-    dt = args[0]
-    theta, v, accel, omega = x[2], x[3], x[4], x[5]
-    u = omega * dt
-    mc0, mc1, _, ms0, ms1, _ = _trig_moments_point(u)
-    forward = v * dt * mc0 + accel * (dt * dt) * mc1
-    left = v * dt * ms0 + accel * (dt * dt) * ms1
-    c, s = math.cos(theta), math.sin(theta)
-    out[:] = x
-    out[0] = x[0] + (c * forward - s * left)
-    out[1] = x[1] + (s * forward + c * left)
-    out[2] = wrap_angle_scalar(theta + u)
-    out[3] = v + accel * dt
-
-
-@numba.njit(cache=True)
-def cca_point(x, args, out) -> None:
-    """:func:`cca_transition` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6,)``."""
-    dt = args[0]
-    v, a, c = x[3], x[4], x[5]
-    s = v * dt + 0.5 * a * (dt * dt)
-    _along_arc_point(x, x[2], s, c * s, out)
-    out[3] = v + a * dt
-
-
-@numba.njit(cache=True)
-def _half_increment(values, noise, first) -> None:
-    """``values[first + j] += noise[j] / 2``: half of the ramp of
-    :meth:`MotionModel.transition_with_noise` (applied to the state before the transition, at
-    mid-step, and to its image after it)."""
-    for j in range(noise.shape[0]):
-        values[first + j] += 0.5 * noise[j]
-
-
-@numba.njit(cache=True)
-def cv_noisy_point(x, noise, args, out) -> None:
-    """CV with the increments ``noise (2,)`` of ``(vx, vy)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 2)
-    cv_point(x, args, out)
-    _half_increment(out, noise, 2)
-
-
-@numba.njit(cache=True)
-def ctrv_noisy_point(x, noise, args, out) -> None:
-    """CTRV with the increments ``noise (2,)`` of ``(v, omega)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 3)
-    ctrv_point(x, args, out)
-    _half_increment(out, noise, 3)
-
-
-@numba.njit(cache=True)
-def ctra_noisy_point(x, noise, args, out) -> None:
-    """CTRA with the increments ``noise (2,)`` of ``(a, omega)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 4)
-    ctra_point(x, args, out)
-    _half_increment(out, noise, 4)
-
-
-@numba.njit(cache=True)
-def cca_noisy_point(x, noise, args, out) -> None:
-    """CCA with the increments ``noise (2,)`` of ``(a, c)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 4)
-    cca_point(x, args, out)
-    _half_increment(out, noise, 4)
-
-
-@numba.njit(cache=True)
-def leading_entries_point(x, args, out) -> None:
-    """``out (m,) = x[:m]``: :func:`gps_position` (``m = 2``) or :func:`pose_measurement` (``m = 3``)."""
-    for j in range(out.shape[0]):
-        out[j] = x[j]
-
-
-@numba.njit(cache=True)
-def leading_entries_jacobian_point(x, args, out) -> None:
-    """``out (m, n) = [I 0]``: the Jacobian of :func:`leading_entries_point` (:func:`gps_jacobian`,
-    :func:`pose_jacobian`)."""
-    _identity_point(out)
-
-
-# Per-point Jacobian kernels (for localization.compiled_ekf): the batched Jacobians above for
-# one state, ``F(x (n,), args = (dt_s,), out (n, n))``, same formulas in the same order.
-
-
-@numba.njit(cache=True)
-def _trig_moments_point(u):
-    """:func:`trig_moments` to order 2 of one angle ``u``: ``(M0c, M1c, M2c, M0s, M1s, M2s)``."""
-    u_nz = 1e-300 if u == 0.0 else u
-    half = 0.5 * u_nz
-    sin_h = math.sin(half)
-    sinc_u = math.sin(u_nz) / u_nz
-    sinc_h = sin_h / half
-    u2 = u * u
-    cos_u = math.cos(u)
-    small = abs(u) < _SERIES_BELOW
-    if small:
-        m1s_over_u = _M1S_OVER_U[4]
-        m2s_over_u = _M2S_OVER_U[4]
-        for k in range(3, -1, -1):
-            m1s_over_u = m1s_over_u * u2 + _M1S_OVER_U[k]
-            m2s_over_u = m2s_over_u * u2 + _M2S_OVER_U[k]
-    else:
-        m1s_over_u = (sinc_u - cos_u) / u2
-    mc1 = sinc_u - 0.5 * sinc_h * sinc_h
-    if not small:
-        m2s_over_u = (2.0 * mc1 - cos_u) / u2
-    return sinc_u, mc1, sinc_u - 2.0 * m1s_over_u, sin_h * sinc_h, u * m1s_over_u, u * m2s_over_u
-
-
-@numba.njit(cache=True)
-def _identity_point(out) -> None:
-    """``out (m, n) = [I 0]`` (``m <= n``)."""
-    out[:] = 0.0
-    for j in range(out.shape[0]):
-        out[j, j] = 1.0
-
-
-@numba.njit(cache=True)
-def cv_jacobian_point(x, args, out) -> None:
-    """:func:`cv_jacobian` of one state ``x (4,)``, ``args = (dt_s,)``, into ``out (4, 4)``."""
-    dt = args[0]
-    _identity_point(out)
-    out[0, 2] = dt
-    out[1, 3] = dt
-
-
-@numba.njit(cache=True)
-def _ctra_like_jacobian_point(x, dt, accel, omega, i_omega, out) -> None:
-    """:func:`_ctra_like_jacobian` of one state (CTRV: ``accel`` is NaN and unused, no index 4 row)."""
-    theta, v = x[2], x[3]
-    has_accel = i_omega == 5
-    mc0, mc1, mc2, ms0, ms1, ms2 = _trig_moments_point(omega * dt)
-    forward = v * dt * mc0
-    left = v * dt * ms0
-    if has_accel:
-        forward = forward + accel * (dt * dt) * mc1
-        left = left + accel * (dt * dt) * ms1
-    c, s = math.cos(theta), math.sin(theta)
-    _identity_point(out)
-    out[0, 2] = -(s * forward + c * left)
-    out[1, 2] = c * forward - s * left
-    out[0, 3] = c * (dt * mc0) - s * (dt * ms0)
-    out[1, 3] = s * (dt * mc0) + c * (dt * ms0)
-    d_forward = -dt * dt * v * ms1
-    d_left = dt * dt * v * mc1
-    if has_accel:
-        d_forward = d_forward - dt**3 * accel * ms2
-        d_left = d_left + dt**3 * accel * mc2
-        out[0, 4] = c * ((dt * dt) * mc1) - s * ((dt * dt) * ms1)
-        out[1, 4] = s * ((dt * dt) * mc1) + c * ((dt * dt) * ms1)
-        out[3, 4] = dt
-    out[0, i_omega] = c * d_forward - s * d_left
-    out[1, i_omega] = s * d_forward + c * d_left
-    out[2, i_omega] = dt
-
-
-@numba.njit(cache=True)
-def ctrv_jacobian_point(x, args, out) -> None:
-    """:func:`ctrv_jacobian` of one state ``x (5,)``, ``args = (dt_s,)``, into ``out (5, 5)``."""
-    _ctra_like_jacobian_point(x, args[0], math.nan, x[4], 4, out)
-
-
-@numba.njit(cache=True)
-def ctra_jacobian_point(x, args, out) -> None:
-    """:func:`ctra_jacobian` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6, 6)``."""
-    _ctra_like_jacobian_point(x, args[0], x[4], x[5], 5, out)
-
-
-@numba.njit(cache=True)
-def cca_jacobian_point(x, args, out) -> None:
-    """:func:`cca_jacobian` of one state ``x (6,)``, ``args = (dt_s,)``, into ``out (6, 6)``."""
-    dt = args[0]
-    theta, v, a, c = x[2], x[3], x[4], x[5]
-    s = v * dt + 0.5 * a * (dt * dt)
-    u = c * s
-    mc0, mc1, _, ms0, ms1, _ = _trig_moments_point(u)
-    cos_t, sin_t = math.cos(theta), math.sin(theta)
-    _identity_point(out)
-    forward, left = s * mc0, s * ms0
-    out[0, 2] = -(sin_t * forward + cos_t * left)
-    out[1, 2] = cos_t * forward - sin_t * left
-    cos_u, sin_u = math.cos(u), math.sin(u)
-    tx = cos_t * cos_u - sin_t * sin_u
-    ty = sin_t * cos_u + cos_t * sin_u
-    out[0, 3] = tx * dt
-    out[1, 3] = ty * dt
-    out[0, 4] = tx * 0.5 * (dt * dt)
-    out[1, 4] = ty * 0.5 * (dt * dt)
-    d_forward, d_left = -s * s * ms1, s * s * mc1
-    out[0, 5] = cos_t * d_forward - sin_t * d_left
-    out[1, 5] = sin_t * d_forward + cos_t * d_left
-    out[2, 3] = c * dt
-    out[2, 4] = 0.5 * c * (dt * dt)
-    out[2, 5] = s
-    out[3, 4] = dt
-
-
 def gps_model(R: Array) -> MeasurementModel:
     """The GPS position model ``(x_m, y_m)`` with noise ``R (2, 2)`` (m^2), with its kernels."""
     return MeasurementModel(
         gps_position,
         R,
         jacobian=gps_jacobian,
-        point=leading_entries_point,
-        jacobian_point=leading_entries_jacobian_point,
+        point=kernels.leading_entries_point,
+        jacobian_point=kernels.leading_entries_jacobian_point,
     )
 
 
@@ -704,8 +293,8 @@ def pose_model(R: Array) -> MeasurementModel:
         R,
         jacobian=pose_jacobian,
         angle_indices=(2,),
-        point=leading_entries_point,
-        jacobian_point=leading_entries_jacobian_point,
+        point=kernels.leading_entries_point,
+        jacobian_point=kernels.leading_entries_jacobian_point,
     )
 
 
@@ -776,15 +365,13 @@ class MotionModel:
         """Noise-augmented transition ``f(x (..., n), e (..., q), dt) -> (..., n)``.
 
         The driven quantities ramp linearly by ``e`` over the step: the state is propagated
-        with them at ``q + e/2`` and they end at ``q + e`` (module docstring).
+        with them at ``q + e/2`` and they end at ``q + e`` (module docstring; the kernel
+        ``noisy_point`` per state).
         """
-        driven = slice(self.noise_indices[0], self.noise_indices[-1] + 1)  # contiguous entries
-        half = 0.5 * np.asarray(noise, dtype=float)
-        x_mid = np.array(x, dtype=float, copy=True)
-        x_mid[..., driven] += half
-        out = self.transition(x_mid, dt_s)
-        out[..., driven] += half
-        return out
+        shape, rows, dts, noise_rows = _rows(x, self.n, self.name, dt_s, noise)
+        out = np.empty_like(rows)
+        kernels.noisy_transition_rows(kernels.MODEL_NUMBERS[self.name], rows, noise_rows, dts, out)
+        return out.reshape(shape + (self.n,))
 
     def process_model(self, Q: Array, noise: ProcessNoise = ProcessNoise.ADDITIVE) -> ProcessModel:
         """This model as a :class:`~localization.models.ProcessModel` with its kernel.
@@ -819,9 +406,9 @@ CV = MotionModel(
     odometry_names=("speed",),
     noise_names=("e_vx", "e_vy"),
     noise_indices=(2, 3),
-    point=cv_point,
-    noisy_point=cv_noisy_point,
-    jacobian_point=cv_jacobian_point,
+    point=kernels.cv_point,
+    noisy_point=kernels.cv_noisy_point,
+    jacobian_point=kernels.cv_jacobian_point,
     noise_intensity=(0.5, 0.5),
 )
 CTRV = MotionModel(
@@ -835,9 +422,9 @@ CTRV = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_v", "e_omega"),
     noise_indices=(3, 4),
-    point=ctrv_point,
-    noisy_point=ctrv_noisy_point,
-    jacobian_point=ctrv_jacobian_point,
+    point=kernels.ctrv_point,
+    noisy_point=kernels.ctrv_noisy_point,
+    jacobian_point=kernels.ctrv_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 CTRA = MotionModel(
@@ -851,9 +438,9 @@ CTRA = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_a", "e_omega"),
     noise_indices=(4, 5),
-    point=ctra_point,
-    noisy_point=ctra_noisy_point,
-    jacobian_point=ctra_jacobian_point,
+    point=kernels.ctra_point,
+    noisy_point=kernels.ctra_noisy_point,
+    jacobian_point=kernels.ctra_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 CCA = MotionModel(
@@ -867,9 +454,9 @@ CCA = MotionModel(
     odometry_names=("speed", "yaw_rate"),
     noise_names=("e_a", "e_c"),
     noise_indices=(4, 5),
-    point=cca_point,
-    noisy_point=cca_noisy_point,
-    jacobian_point=cca_jacobian_point,
+    point=kernels.cca_point,
+    noisy_point=kernels.cca_noisy_point,
+    jacobian_point=kernels.cca_jacobian_point,
     noise_intensity=(0.5, 0.25),
 )
 

@@ -80,7 +80,7 @@ class SigmaWeights:
     @cached_property
     def packed(self) -> np.ndarray:
         """``(3,)`` ``(gamma, Wi, c0)``, read-only: the weights as the compiled UKF takes them
-        (:mod:`localization.compiled_ukf`). Cached with the weights, so a step builds nothing."""
+        (:mod:`localization.compiled.ukf`). Cached with the weights, so a step builds nothing."""
         packed = np.array([self.gamma, self.wi, self.c0])
         packed.flags.writeable = False
         return packed

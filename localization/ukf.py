@@ -28,7 +28,7 @@ model are wrapped in every residual and mean.
 Two paths. When a model carries a per-point kernel (``point=``, e.g. the models built by
 ``CTRV.process_model(Q)``, :func:`~localization.motion_models.pose_model`) and the step can be
 expressed there (a flat batch or one run, arguments that are numbers), the step runs compiled
-(:mod:`localization.compiled_ukf`: one call per step, the same maths term by term, equal to
+(:mod:`localization.compiled.ukf`: one call per step, the same maths term by term, equal to
 rounding; about 20 us for a CTRV predict + update instead of about 100 us). Otherwise, and
 whenever the compiled step declines (a covariance not positive definite, a non-finite input
 or result), the numpy path below takes the step; it is the reference, and the one that
@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from localization import compiled_ukf
+from localization.compiled import ukf as compiled_ukf
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import PDPolicy, cholesky, require_finite, solve, wrap_columns

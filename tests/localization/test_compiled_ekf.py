@@ -1,4 +1,4 @@
-"""The compiled EKF path (localization.compiled_ekf) against the numpy EKF, its reference.
+"""The compiled EKF path (localization.compiled.ekf) against the numpy EKF, its reference.
 
 Each model is run twice through the same :class:`ExtendedKalmanFilter`: once with its
 per-point kernels (compiled path) and once as the same batched functions without the Jacobian
@@ -17,7 +17,8 @@ import numba
 import numpy as np
 import pytest
 
-from localization import compiled_ekf
+from localization.compiled import ekf as compiled_ekf
+from localization.compiled.motion import leading_entries_jacobian_point
 from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
@@ -26,7 +27,6 @@ from localization.motion_models import (
     MODELS,
     gps_jacobian,
     gps_model,
-    leading_entries_jacobian_point,
     pose_jacobian,
     pose_model,
 )
@@ -64,7 +64,10 @@ def assert_bitwise_runs(batched: Gaussian, one_by_one, runs) -> None:
 
 
 @pytest.mark.parametrize("name", sorted(MODELS))
-def test_jacobian_kernels_match_the_numpy_jacobians(name):
+def test_jacobian_kernels_match_finite_differences_of_the_transition_kernels(name):
+    """The Jacobian kernels as the compiled EKF calls them (one state, ``args (1,)``) against
+    central differences of the transition kernels, at the turned angles where the moments
+    switch branches (0, tiny, around the series threshold, large) and across the heading wrap."""
     motion = MODELS[name]
     rng = np.random.default_rng(21)
     states = rng.normal(size=(40, motion.n)) * 2.0
@@ -73,13 +76,22 @@ def test_jacobian_kernels_match_the_numpy_jacobians(name):
     states[4:8, turn] = np.array([0.099, 0.1, -0.101, 0.5]) / DT_S
     if motion.angle_indices:
         states[8:12, 2] = [math.pi - 1e-9, -math.pi, 3.1, -3.1]
-    reference = motion.jacobian(states, DT_S)
-    out = np.empty((motion.n, motion.n))
+    out, plus, minus = np.empty((motion.n, motion.n)), np.empty(motion.n), np.empty(motion.n)
     args = np.array([DT_S])
-    for state, expected in zip(states, reference, strict=True):
+    for state in states:
         out[:] = np.nan
         motion.jacobian_point(state, args, out)
-        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-13 * np.abs(expected).max())
+        for j in range(motion.n):
+            h = 1e-6 * max(1.0, abs(state[j]))
+            bumped = state.copy()
+            bumped[j] += h
+            motion.point(bumped, args, plus)
+            bumped[j] -= 2 * h
+            motion.point(bumped, args, minus)
+            column = plus - minus
+            for i in motion.angle_indices:  # the wrapped heading may jump by 2 pi
+                column[i] = (column[i] + math.pi) % (2 * math.pi) - math.pi
+            np.testing.assert_allclose(out[:, j], column / (2 * h), rtol=1e-6, atol=1e-7)
     if name == "CTRV":  # the straight line: F[0:2, 4] is the second-order term of the arc
         motion.jacobian_point(np.array([0.0, 0.0, 0.0, 2.0, 0.0]), args, out)
         np.testing.assert_allclose(out[:2, 4], [0.0, 0.5 * 2.0 * DT_S**2], rtol=1e-15)

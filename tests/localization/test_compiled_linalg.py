@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from localization import linalg
-from localization.compiled_linalg import (
+from localization.compiled.linalg import (
     all_finite,
     cholesky_lower,
     cholesky_solve,

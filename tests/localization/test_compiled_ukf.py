@@ -1,4 +1,4 @@
-"""The compiled UKF path (localization.compiled_ukf) against the numpy path, its reference.
+"""The compiled UKF path (localization.compiled.ukf) against the numpy path, its reference.
 
 Each model is run twice through the same :class:`UnscentedKalmanFilter`: once with its
 per-point kernel (compiled path) and once as the same batched function without a kernel
@@ -19,7 +19,7 @@ import numba
 import numpy as np
 import pytest
 
-from localization import compiled_ukf
+from localization.compiled import ukf as compiled_ukf
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import CovarianceRepairWarning, PDPolicy

@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 from shapely.geometry import box
 
-from localization import mcl_kernels as kernels
+from localization.compiled import mcl as kernels
 from localization.errors import EstimationError
 from localization.mcl import (
     BeamCombination,

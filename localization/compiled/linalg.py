@@ -1,7 +1,7 @@
 """Scalar linear-algebra kernels for the compiled filter steps (numba, ``nopython``).
 
 A sequential filter on a few states spends its time in the overheads of numpy calls on tiny
-arrays (about 1 us a call, some 75 calls a UKF step). The compiled steps (:mod:`localization.compiled_ukf`,
+arrays (about 1 us a call, some 75 calls a UKF step). The compiled steps (:mod:`localization.compiled.ukf`,
 the dead-reckoning kernel) run the whole step in one call instead, and share these small
 kernels. Each works on one run: a vector ``(n,)`` or a matrix ``(n, n)`` of float64, written
 into a caller's buffer so that a batch loop allocates nothing. The numpy implementations in
@@ -131,3 +131,14 @@ def kalman_gain_t(cov, jac, noise_cov, cross, s_cov, s_chol, gain_t) -> bool:
                 total += jac[c, k] * cross[k, d]
             s_cov[c, d] = total + noise_cov[c, d]
     return gain_from_cross(s_cov, cross, s_chol, gain_t)
+
+
+@numba.njit(cache=True)
+def symmetrise_in_place(matrix) -> None:
+    """``matrix (n, n) = (matrix + matrix^T) / 2`` in place (exactly symmetric)."""
+    n = matrix.shape[0]
+    for i in range(n):
+        for j in range(i):
+            value = 0.5 * (matrix[i, j] + matrix[j, i])
+            matrix[i, j] = value
+            matrix[j, i] = value

@@ -37,7 +37,7 @@ import math
 import numba
 import numpy as np
 
-from localization.compiled_linalg import (
+from localization.compiled.linalg import (
     all_finite,
     cholesky_lower,
     kalman_gain_t,
@@ -51,10 +51,11 @@ N_MEASUREMENTS = 3  # (v_enc, omega_enc, gyro)
 
 
 @numba.njit(cache=True)
-def _transition(state, accel_m_s2, dt_s, out) -> None:
-    """``out (8,) = f(state (8,))``: the unicycle with the mid-step heading, the accelerometer
-    as the input of ``v`` (the formulas and their order of
-    :func:`localization.dead_reckoning.transition`)."""
+def transition(state, accel_m_s2, dt_s, out) -> None:
+    """``out (8,) = f(state (8,))`` over ``dt_s``: the unicycle with the mid-step heading
+    ``theta + dt omega / 2``, the forward accelerometer ``accel_m_s2`` less its bias as the
+    input of ``v`` (the model of :mod:`localization.dead_reckoning`; its batched
+    :func:`localization.dead_reckoning.transition` runs this per state)."""
     for i in range(N_STATES):
         out[i] = state[i]
     theta, v, omega = state[THETA], state[V], state[OMEGA]
@@ -91,13 +92,13 @@ def _unscented_predict(
     n = N_STATES
     if not cholesky_lower(cov, chol):
         return False
-    _transition(mean, accel_m_s2, dt_s, shift)  # Y_0, kept in shift until d is known
+    transition(mean, accel_m_s2, dt_s, shift)  # Y_0, kept in shift until d is known
     for i in range(n):  # X_{1+i} = x + gamma L_i, X_{n+1+i} = x - gamma L_i
         for half in range(2):
             row, sign = half * n + i, 1.0 - 2.0 * half
             for j in range(n):
                 point[j] = mean[j] + sign * (gamma * chol[j, i])
-            _transition(point, accel_m_s2, dt_s, image)
+            transition(point, accel_m_s2, dt_s, image)
             for j in range(n):
                 dev[row, j] = image[j] - shift[j]  # D_i = Y_i - Y_0
             if wrap_offsets:
@@ -121,15 +122,15 @@ def _unscented_predict(
 
 
 @numba.njit(cache=True)
-def _linearised_predict(mean, cov, accel_m_s2, dt_s, q_cov, jac, product, image) -> None:
-    """``mean (8,)``, ``cov (8, 8)`` replaced by ``f(x)`` and ``F P F^T + Q`` (the Jacobian of
-    :func:`localization.dead_reckoning.transition_jacobian`); ``jac``, ``product (8, 8)`` and
-    ``image (8,)`` are work buffers."""
+def transition_jacobian(state, dt_s, jac) -> None:
+    """``jac (8, 8) = df/ds`` of :func:`transition` at ``state (8,)`` (independent of the
+    accelerometer input): the linear part ``A`` (``theta += dt omega``, ``v -= dt b_accel``)
+    and the motion of ``x, y``."""
     n = N_STATES
-    theta, v, omega = mean[THETA], mean[V], mean[OMEGA]
+    theta, v, omega = state[THETA], state[V], state[OMEGA]
     heading = theta + 0.5 * dt_s * omega
     cos, sin = dt_s * math.cos(heading), dt_s * math.sin(heading)
-    for i in range(n):  # F = A (the linear part) + the motion of x, y
+    for i in range(n):
         for j in range(n):
             jac[i, j] = 1.0 if i == j else 0.0
     jac[THETA, OMEGA] = dt_s
@@ -140,7 +141,29 @@ def _linearised_predict(mean, cov, accel_m_s2, dt_s, q_cov, jac, product, image)
     jac[Y, THETA] = v * cos
     jac[Y, V] = sin
     jac[Y, OMEGA] = 0.5 * dt_s * v * cos
-    _transition(mean, accel_m_s2, dt_s, image)
+
+
+@numba.njit(cache=True)
+def transition_rows(states, accel_m_s2, dt_s, out) -> None:
+    """``out (N, 8)``: :func:`transition` of each row of ``states (N, 8)`` with ``accel_m_s2 (N,)``."""
+    for i in range(states.shape[0]):
+        transition(states[i], accel_m_s2[i], dt_s, out[i])
+
+
+@numba.njit(cache=True)
+def jacobian_rows(states, dt_s, out) -> None:
+    """``out (N, 8, 8)``: :func:`transition_jacobian` at each row of ``states (N, 8)``."""
+    for i in range(states.shape[0]):
+        transition_jacobian(states[i], dt_s, out[i])
+
+
+@numba.njit(cache=True)
+def _linearised_predict(mean, cov, accel_m_s2, dt_s, q_cov, jac, product, image) -> None:
+    """``mean (8,)``, ``cov (8, 8)`` replaced by ``f(x)`` and ``F P F^T + Q``; ``jac``,
+    ``product (8, 8)`` and ``image (8,)`` are work buffers."""
+    n = N_STATES
+    transition_jacobian(mean, dt_s, jac)
+    transition(mean, accel_m_s2, dt_s, image)
     for i in range(n):
         mean[i] = image[i]
     for i in range(n):  # F P

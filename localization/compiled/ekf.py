@@ -21,10 +21,10 @@ The maths is that of :mod:`localization.ekf`, term by term::
               P+ = sym((A P) A^T + (K R) K^T)                         (Joseph form)
 
 with ``sym(M) = (M + M^T) / 2``. Kernel conventions (the per-point kernels of
-:mod:`localization.compiled_ukf`): ``f(x (n,), args (k,), out (n,))``,
+:mod:`localization.compiled.ukf`): ``f(x (n,), args (k,), out (n,))``,
 ``F(x (n,), args (k,), out (n, n))``, ``h(x (n,), args (k,), out (m,))``,
 ``H(x (n,), args (k,), out (m, n))``, with ``args`` the step's arguments packed as floats
-(:func:`localization.compiled_ukf.pack_args`).
+(:func:`localization.compiled.glue.pack_args`).
 
 Entries. The cores take the kernels as arguments and are called only from other compiled
 functions; the entries Python calls are module-level and cached on disk for the built-in
@@ -33,9 +33,8 @@ kernels (one prediction entry switches between the four motion models by their n
 pair of kernels (:func:`predict_entry`, :func:`update_entry`).
 
 Status codes, array conventions and the Python-side helpers are those of
-:mod:`localization.compiled_ukf`: :data:`~localization.compiled_ukf.OK`,
-:data:`~localization.compiled_ukf.NOT_POSITIVE_DEFINITE` (``S``) or
-:data:`~localization.compiled_ukf.NOT_FINITE` (an argument, ``z`` or a result); on anything but
+:mod:`localization.compiled.glue`: ``OK``, ``NOT_POSITIVE_DEFINITE`` (``S``) or ``NOT_FINITE``
+(an argument, ``z`` or a result); on anything but
 ``OK`` the caller runs the numpy step, which gives its own results, errors and warnings.
 Runs are independent and computed by the same code, so a batch gives its runs' one-by-one
 results bit for bit.
@@ -46,20 +45,24 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization import motion_models
-from localization.compiled_linalg import all_finite, kalman_gain_t, wrap_angle
-from localization.compiled_ukf import (
+from localization.compiled import motion
+from localization.compiled.glue import (
     NOT_FINITE,
     NOT_POSITIVE_DEFINITE,
     OK,
     angle_array,
-    compile_error,
+    call_entry,
     pack_args,
     per_run,
     read_only,
     runs_of,
-    symmetrise_in_place,
     writable,
+)
+from localization.compiled.linalg import (
+    all_finite,
+    kalman_gain_t,
+    symmetrise_in_place,
+    wrap_angle,
 )
 
 # ------------------------------------------------------------------------------- the cores
@@ -189,25 +192,25 @@ def update_core(
 
 
 # ------------------------------------------------------------------- cached built-in entries
-# As in localization.compiled_ukf: module-level entries (cached on disk), kernels named as
+# As in localization.compiled.ukf: module-level entries (cached on disk), kernels named as
 # module attributes so that numba resolves them to constants.
 
-#: The built-in process kernels ``(f, F)``, by the number :func:`_predict_builtin` switches on.
+#: The built-in process kernels ``(f, F)``, by the number :func:`predict_builtin` switches on.
 BUILTIN_PROCESS_KERNELS = (
-    (motion_models.cv_point, motion_models.cv_jacobian_point),
-    (motion_models.ctrv_point, motion_models.ctrv_jacobian_point),
-    (motion_models.ctra_point, motion_models.ctra_jacobian_point),
-    (motion_models.cca_point, motion_models.cca_jacobian_point),
+    (motion.cv_point, motion.cv_jacobian_point),
+    (motion.ctrv_point, motion.ctrv_jacobian_point),
+    (motion.ctra_point, motion.ctra_jacobian_point),
+    (motion.cca_point, motion.cca_jacobian_point),
 )
 
 
 @numba.njit(cache=True)
-def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
+def predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
     """:func:`predict_core` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return predict_core(
-            motion_models.cv_point,
-            motion_models.cv_jacobian_point,
+            motion.cv_point,
+            motion.cv_jacobian_point,
             mean,
             cov,
             args,
@@ -218,8 +221,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
         )
     if model == 1:
         return predict_core(
-            motion_models.ctrv_point,
-            motion_models.ctrv_jacobian_point,
+            motion.ctrv_point,
+            motion.ctrv_jacobian_point,
             mean,
             cov,
             args,
@@ -230,8 +233,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
         )
     if model == 2:
         return predict_core(
-            motion_models.ctra_point,
-            motion_models.ctra_jacobian_point,
+            motion.ctra_point,
+            motion.ctra_jacobian_point,
             mean,
             cov,
             args,
@@ -241,8 +244,8 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
             out_cov,
         )
     return predict_core(
-        motion_models.cca_point,
-        motion_models.cca_jacobian_point,
+        motion.cca_point,
+        motion.cca_jacobian_point,
         mean,
         cov,
         args,
@@ -254,10 +257,10 @@ def _predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
 
 
 @numba.njit(cache=True)
-def _update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
+def update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
     return update_core(
-        motion_models.leading_entries_point,
-        motion_models.leading_entries_jacobian_point,
+        motion.leading_entries_point,
+        motion.leading_entries_jacobian_point,
         mean,
         cov,
         z,
@@ -273,15 +276,15 @@ def _update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out
 #: Prediction entries by ``(f, F)`` kernels: ``(entry, number)``, called ``entry(number, ...)``;
 #: the built-ins' (cached on disk), then users' (:func:`predict_entry`).
 PREDICT_ENTRIES = {
-    pair: (_predict_builtin, number) for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
+    pair: (predict_builtin, number) for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
 }
 
 #: Update entries by ``(h, H)`` kernels: the built-in one (cached on disk), then users'.
 UPDATE_ENTRIES = {
     (
-        motion_models.leading_entries_point,
-        motion_models.leading_entries_jacobian_point,
-    ): _update_leading_entries
+        motion.leading_entries_point,
+        motion.leading_entries_jacobian_point,
+    ): update_leading_entries
 }
 
 
@@ -349,22 +352,17 @@ def predict(
     out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
     key = (model.point, model.jacobian_point)
     entry, number = PREDICT_ENTRIES.get(key) or predict_entry(*key)
-    try:
-        status = entry(
-            number,
-            read_only(mean.reshape(runs, n)),
-            read_only(cov.reshape(runs, n, n)),
-            packed,
-            q_cov,
-            angle_array(angle_indices),
-            out_mean,
-            out_cov,
-        )
-    except numba.core.errors.TypingError as exc:
-        raise compile_error("EKF", "predict", key, exc) from None
-    if status != OK:
-        return None
-    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
+    arguments = (
+        number,
+        read_only(mean.reshape(runs, n)),
+        read_only(cov.reshape(runs, n, n)),
+        packed,
+        q_cov,
+        angle_array(angle_indices),
+        out_mean,
+        out_cov,
+    )
+    return call_entry(entry, arguments, "EKF", "predict", key, mean.ndim == 2)
 
 
 def update(
@@ -392,20 +390,15 @@ def update(
     out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
     key = (model.point, model.jacobian_point)
     entry = UPDATE_ENTRIES.get(key) or update_entry(*key)
-    try:
-        status = entry(
-            read_only(mean.reshape(runs, n)),
-            read_only(cov.reshape(runs, n, n)),
-            writable(z.reshape(runs, m)),
-            packed,
-            r_cov,
-            angle_array(angle_indices),
-            angle_array(model.angle_indices),
-            out_mean,
-            out_cov,
-        )
-    except numba.core.errors.TypingError as exc:
-        raise compile_error("EKF", "update", key, exc) from None
-    if status != OK:
-        return None
-    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
+    arguments = (
+        read_only(mean.reshape(runs, n)),
+        read_only(cov.reshape(runs, n, n)),
+        writable(z.reshape(runs, m)),
+        packed,
+        r_cov,
+        angle_array(angle_indices),
+        angle_array(model.angle_indices),
+        out_mean,
+        out_cov,
+    )
+    return call_entry(entry, arguments, "EKF", "update", key, mean.ndim == 2)

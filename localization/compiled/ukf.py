@@ -32,9 +32,8 @@ Per-point kernels. A model gives ``f(x (n,), args (k,), out (n,))`` (additive no
 ``f(x (n,), w (q,), args (k,), out (n,))`` (augmented noise) or ``h(x (n,), args (k,), out (m,))``,
 compiled with ``numba.njit``, writing its result into ``out``; ``x`` and ``w`` are scratch
 copies of the sigma point (a kernel may overwrite them). ``args`` are the step's extra
-arguments packed as floats (:func:`pack_args`): each argument flattened, in order. The
-kernels of the motion models live beside their numpy versions in
-:mod:`localization.motion_models`.
+arguments packed as floats (:func:`~localization.compiled.glue.pack_args`): each argument
+flattened, in order. The kernels of the motion models are :mod:`localization.compiled.motion`.
 
 Entries. The generic cores (:func:`predict_core`, :func:`update_core`) take the kernel as an
 argument, so they are only called from other compiled functions: numba then inlines the
@@ -44,11 +43,12 @@ prediction entry switches between the four motion models, so their first compila
 10 s per noise kind, happens together);
 for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
 compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
-file only; :mod:`localization.kernel_cache` drops the package's cache whenever a kernel source
-(:mod:`localization.motion_models` among them) changes.
+file only; :mod:`localization.kernel_cache` drops the folder's cache whenever any of its files
+changes. The lean entries of :mod:`localization.compiled.lean` call the built-in entries.
 
-Status. An entry returns :data:`OK`, :data:`NOT_POSITIVE_DEFINITE` (a covariance to factorise,
-``P`` or ``S``) or :data:`NOT_FINITE` (an argument or a result). On anything but ``OK`` the
+Status. An entry returns a status code of :mod:`localization.compiled.glue`: ``OK``,
+``NOT_POSITIVE_DEFINITE`` (a covariance to factorise, ``P`` or ``S``) or ``NOT_FINITE`` (an
+argument or a result). On anything but ``OK`` the
 caller discards the outputs and runs the numpy step, which applies the filter's
 :class:`~localization.linalg.PDPolicy` and raises the errors of the numpy path, word for word.
 
@@ -63,21 +63,28 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from localization import motion_models
-from localization.compiled_linalg import (
+from localization.compiled import motion
+from localization.compiled.glue import (
+    NOT_FINITE,
+    NOT_POSITIVE_DEFINITE,
+    OK,
+    angle_array,
+    call_entry,
+    pack_args,
+    per_run,
+    read_only,
+    runs_of,
+    writable,
+)
+from localization.compiled.linalg import (
     all_finite,
     cholesky_lower,
     gain_from_cross,
+    symmetrise_in_place,
     wrap_angle,
     wrap_residual,
 )
-from localization.errors import EstimationError
 from localization.models import ProcessNoise
-
-OK = 0
-NOT_POSITIVE_DEFINITE = 1
-NOT_FINITE = 2
-
 
 # ------------------------------------------------------------------------------- the cores
 
@@ -117,17 +124,6 @@ def _moments(dev, count, y0, weights, angles, noise_cov, out_mean, out_cov, shif
                 value = value + noise_cov[j, k]
             out_cov[j, k] = value
             out_cov[k, j] = value
-
-
-@numba.njit(cache=True)
-def symmetrise_in_place(matrix) -> None:
-    """``matrix (n, n) = (matrix + matrix^T) / 2`` in place (exactly symmetric)."""
-    n = matrix.shape[0]
-    for i in range(n):
-        for j in range(i):
-            value = 0.5 * (matrix[i, j] + matrix[j, i])
-            matrix[i, j] = value
-            matrix[j, i] = value
 
 
 @numba.njit(cache=True)
@@ -328,50 +324,50 @@ def update_core(
 # ------------------------------------------------------------------- cached built-in entries
 # Module-level entries, so numba caches their machine code on disk; one entry holds the
 # four motion models (a closure per model would not be cached). The kernel is named as a
-# module attribute (``motion_models.ctrv_point``): numba resolves that to a constant while
+# module attribute (``motion.ctrv_point``): numba resolves that to a constant while
 # typing, whereas a bare imported name passed as a value is lowered as a pointer to the
 # Python object, which makes the entry uncacheable ("dynamic globals").
 
 
 #: The built-in process kernels (additive, augmented), by the number the entries switch on.
 BUILTIN_PROCESS_KERNELS = (
-    (motion_models.cv_point, motion_models.cv_noisy_point),
-    (motion_models.ctrv_point, motion_models.ctrv_noisy_point),
-    (motion_models.ctra_point, motion_models.ctra_noisy_point),
-    (motion_models.cca_point, motion_models.cca_noisy_point),
+    (motion.cv_point, motion.cv_noisy_point),
+    (motion.ctrv_point, motion.ctrv_noisy_point),
+    (motion.ctra_point, motion.ctra_noisy_point),
+    (motion.cca_point, motion.cca_noisy_point),
 )
 
 
 @numba.njit(cache=True)
-def _predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
+def predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
     """:func:`predict_core` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return predict_core(
-            motion_models.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     if model == 1:
         return predict_core(
-            motion_models.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     if model == 2:
         return predict_core(
-            motion_models.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+            motion.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
         )
     return predict_core(
-        motion_models.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
+        motion.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
     )
 
 
 @numba.njit(cache=True)
-def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
+def noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
     """:func:`augmented_predict_core` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
     if model == 0:
         return augmented_predict_core(
-            motion_models.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+            motion.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
         )
     if model == 1:
         return augmented_predict_core(
-            motion_models.ctrv_noisy_point,
+            motion.ctrv_noisy_point,
             mean,
             cov,
             args,
@@ -383,7 +379,7 @@ def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_me
         )
     if model == 2:
         return augmented_predict_core(
-            motion_models.ctra_noisy_point,
+            motion.ctra_noisy_point,
             mean,
             cov,
             args,
@@ -394,16 +390,16 @@ def _noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_me
             out_cov,
         )
     return augmented_predict_core(
-        motion_models.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+        motion.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
     )
 
 
 @numba.njit(cache=True)
-def _update_leading_entries(
+def update_leading_entries(
     mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
 ):
     return update_core(
-        motion_models.leading_entries_point,
+        motion.leading_entries_point,
         mean,
         cov,
         z,
@@ -420,13 +416,13 @@ def _update_leading_entries(
 #: Prediction entries by (kernel, augmented): ``(entry, number)``, called ``entry(number, ...)``;
 #: the built-ins' (cached on disk), then users' (:func:`predict_entry`).
 PREDICT_ENTRIES = {
-    (kernel, bool(augmented)): (_noisy_predict_builtin if augmented else _predict_builtin, number)
+    (kernel, bool(augmented)): (noisy_predict_builtin if augmented else predict_builtin, number)
     for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
     for augmented, kernel in enumerate(pair)
 }
 
 #: Cached entries of the built-in measurement kernels, by kernel.
-UPDATE_ENTRIES = {motion_models.leading_entries_point: _update_leading_entries}
+UPDATE_ENTRIES = {motion.leading_entries_point: update_leading_entries}
 
 
 # -------------------------------------------------------------------- entries of user kernels
@@ -474,121 +470,6 @@ def update_entry(point):
 
 
 # -------------------------------------------------------------------------- the Python side
-# A single step's budget is a few microseconds, so the glue below avoids every check it can:
-# noise matrices are read-only C-contiguous float arrays by construction (models.py), beliefs
-# almost always are, and a step's arguments are usually the same float every step.
-
-_F64 = np.dtype(np.float64)
-_ANGLE_ARRAYS: dict[tuple[int, ...], np.ndarray] = {}
-_PACKED_FLOATS: dict[tuple[float, ...], np.ndarray] = {}  # recent all-float arguments, packed
-_PACKED_FLOATS_MAX = 64
-
-
-def angle_array(angle_indices: tuple[int, ...]) -> np.ndarray:
-    """The angle indices as a read-only int64 array (memoised per tuple)."""
-    found = _ANGLE_ARRAYS.get(angle_indices)
-    if found is None:
-        found = np.array(angle_indices, dtype=np.int64)
-        found.flags.writeable = False
-        _ANGLE_ARRAYS[angle_indices] = found
-    return found
-
-
-def read_only(values: np.ndarray) -> np.ndarray:
-    """``values`` as a read-only C-contiguous float64 array (itself when it already is one)."""
-    flags = values.flags
-    if flags.writeable or not flags.c_contiguous or values.dtype is not _F64:
-        values = np.array(values, dtype=np.float64, order="C")
-        values.flags.writeable = False
-    return values
-
-
-def writable(values: np.ndarray) -> np.ndarray:
-    """``values`` as a writable C-contiguous float64 array (itself when it already is one): a
-    measurement ``z`` is usually a user's writable array, so this spares a copy per step."""
-    flags = values.flags
-    if not flags.writeable or not flags.c_contiguous or values.dtype is not _F64:
-        values = np.array(values, dtype=np.float64, order="C")
-    return values
-
-
-def pack_args(args: tuple, batch: tuple[int, ...]) -> np.ndarray | None:
-    """The step's arguments as read-only floats ``(B or 1, k)``, or ``None`` when they cannot be packed.
-
-    Each argument, in order, contributes its entries flattened: a number one column, a
-    per-run array (leading axis ``B``, as :func:`localization.ukf.at_sigma_points` decides) its
-    entries per run, any other real array its entries shared by every run. Anything else (not
-    real numbers) gives ``None``: the numpy path then takes the step. All-float arguments are
-    memoised (a filter's ``dt_s`` repeats every step; at most a few dozen are kept).
-    """
-    try:
-        packed = _PACKED_FLOATS.get(args)
-    except TypeError:  # an unhashable argument (an array)
-        packed = None
-    if packed is not None:
-        return packed
-    if all(type(a) is float for a in args):  # the common case: (dt_s,) or ()
-        if len(_PACKED_FLOATS) >= _PACKED_FLOATS_MAX:
-            _PACKED_FLOATS.clear()
-        packed = _PACKED_FLOATS[args] = np.array([args], dtype=np.float64).reshape(1, len(args))
-        packed.flags.writeable = False
-        return packed
-    runs = batch[0] if batch else 1
-    columns, per_run = [], False
-    for a in args:
-        if isinstance(a, (int, float, np.integer, np.floating)):
-            columns.append(np.full((1, 1), float(a)))
-        elif isinstance(a, np.ndarray) and a.dtype.kind in "biuf":
-            per_run_array = bool(batch) and a.shape[:1] == batch
-            columns.append(a.reshape(runs, -1) if per_run_array else a.reshape(1, -1))
-            per_run = per_run or per_run_array
-        else:
-            return None
-    rows = runs if per_run else 1
-    packed = np.empty((rows, sum(c.shape[1] for c in columns)))
-    start = 0
-    for c in columns:
-        packed[:, start : start + c.shape[1]] = c
-        start += c.shape[1]
-    packed.flags.writeable = False
-    return packed
-
-
-def per_run(cov: np.ndarray, runs: int) -> np.ndarray | None:
-    """A noise matrix ``(k, k)`` or per-run ``(B, k, k)`` as ``(1 or B, k, k)``, or ``None``."""
-    if cov.ndim == 2:
-        return cov[None]
-    if cov.ndim == 3 and cov.shape[0] == runs:
-        return cov
-    return None
-
-
-def compile_error(filter_name: str, kind: str, point, exc: Exception) -> EstimationError:
-    """The error for a user's kernel (or tuple of kernels, the EKF's model and Jacobian) that
-    does not compile for a ``kind`` (``"predict"`` or ``"update"``) step of ``filter_name``."""
-    points = point if isinstance(point, tuple) else (point,)
-    names = " and ".join(getattr(p, "__name__", repr(p)) for p in points)
-    if filter_name == "EKF":
-        expected = (
-            "h(x, args, out (m,)) and H(x, args, out (m, n))"
-            if kind == "update"
-            else ("f(x, args, out (n,)) and F(x, args, out (n, n))")
-        )
-    else:
-        expected = (
-            "h(x, args, out)" if kind == "update" else "f(x, args, out) or f(x, w, args, out)"
-        )
-    return EstimationError(
-        f"{filter_name} {kind}: the kernel {names} does not compile for this step (expected {expected} "
-        f"on float64 arrays): {str(exc).strip().splitlines()[0]}"
-    )
-
-
-def runs_of(mean: np.ndarray) -> int:
-    """The number of runs of a belief that the compiled path takes, or 0 (numpy path)."""
-    if mean.ndim == 1:
-        return 1
-    return mean.shape[0] if mean.ndim == 2 else 0
 
 
 def predict(
@@ -612,23 +493,18 @@ def predict(
     entry, number = PREDICT_ENTRIES.get((model.point, augmented)) or predict_entry(
         model.point, augmented
     )
-    try:
-        status = entry(
-            number,
-            read_only(mean.reshape(runs, n)),
-            read_only(cov.reshape(runs, n, n)),
-            packed,
-            noise,
-            weights.packed,
-            angle_array(angle_indices),
-            out_mean,
-            out_cov,
-        )
-    except numba.core.errors.TypingError as exc:
-        raise compile_error("UKF", "predict", model.point, exc) from None
-    if status != OK:
-        return None
-    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
+    arguments = (
+        number,
+        read_only(mean.reshape(runs, n)),
+        read_only(cov.reshape(runs, n, n)),
+        packed,
+        noise,
+        weights.packed,
+        angle_array(angle_indices),
+        out_mean,
+        out_cov,
+    )
+    return call_entry(entry, arguments, "UKF", "predict", model.point, mean.ndim == 2)
 
 
 def update(
@@ -661,21 +537,16 @@ def update(
     n = mean.shape[-1]
     out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
     entry = UPDATE_ENTRIES.get(model.point) or update_entry(model.point)
-    try:
-        status = entry(
-            read_only(mean.reshape(runs, n)),
-            read_only(cov.reshape(runs, n, n)),
-            writable(z.reshape(runs, m)),
-            packed,
-            r_cov,
-            weights.packed,
-            angle_array(angle_indices),
-            angle_array(model.angle_indices),
-            out_mean,
-            out_cov,
-        )
-    except numba.core.errors.TypingError as exc:
-        raise compile_error("UKF", "update", model.point, exc) from None
-    if status != OK:
-        return None
-    return (out_mean, out_cov) if mean.ndim == 2 else (out_mean[0], out_cov[0])
+    arguments = (
+        read_only(mean.reshape(runs, n)),
+        read_only(cov.reshape(runs, n, n)),
+        writable(z.reshape(runs, m)),
+        packed,
+        r_cov,
+        weights.packed,
+        angle_array(angle_indices),
+        angle_array(model.angle_indices),
+        out_mean,
+        out_cov,
+    )
+    return call_entry(entry, arguments, "UKF", "update", model.point, mean.ndim == 2)
