@@ -45,8 +45,11 @@ from localization.localizer import (
 )
 from scenarios.epochs import EpochLog, EpochRunner
 from scenarios.metrics import (
+    RECOVERY_DISTANCE_M,
+    RECOVERY_HOLD_S,
     consistency_stats,
     interval_stats,
+    recovery_time_s,
     rmse_heading_rad,
     rmse_position_m,
 )
@@ -55,6 +58,8 @@ from scenarios.spec import ScenarioSpec
 __all__ = [
     "BRANCHES",
     "FUSED",
+    "RECOVERY_DISTANCE_M",
+    "RECOVERY_HOLD_S",
     "START_POSE_STD",
     "UKF_ONLY",
     "Estimation",
@@ -133,6 +138,8 @@ class StageTimes:
     dr_step_us: np.ndarray
     """Wall time per dead-reckoning step (both branches), one value per stretch run,
     microseconds."""
+    mcl_s: float = 0.0
+    """The particle filter's wall time (``estimator = "mcl"``; then the others are 0)."""
 
 
 def dead_reckoning_noise(spec: ScenarioSpec) -> DeadReckoningNoise:
@@ -398,25 +405,10 @@ def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any
     return summary
 
 
-#: Recovered: the fused estimate within this distance of the truth (m) for
-#: :data:`RECOVERY_HOLD_S` seconds (the Fox-Burgard-Thrun protocol).
-RECOVERY_DISTANCE_M = 0.45
-RECOVERY_HOLD_S = 10.0
-
-
 def recovery_s(log: SensorData, estimation: Estimation, t_s: float) -> float | None:
-    """Seconds from ``t_s`` (a kidnapping) to the first sample from which the fused
-    position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
-    :data:`RECOVERY_HOLD_S` (None: not within the run)."""
-    start = int(np.searchsorted(log.t_s, t_s - 0.5 / log.rate_hz))
-    hold = round(RECOVERY_HOLD_S * log.rate_hz)
-    error = np.linalg.norm(estimation.pose[FUSED, :, :2] - log.pose[:, :2], axis=1)
-    misses = np.concatenate([[0], np.cumsum(error > RECOVERY_DISTANCE_M)])  # misses before k
-    first = np.arange(start, len(error) - hold + 1)
-    clean = misses[first + hold] == misses[first]  # no miss in [k, k + hold)
-    if not clean.any():
-        return None
-    return float((first[np.argmax(clean)] - start) / log.rate_hz)
+    """Seconds from ``t_s`` (a kidnapping) until the fused position is back near the truth
+    for good (:func:`scenarios.metrics.recovery_time_s`; None: not within the run)."""
+    return recovery_time_s(log.t_s, log.rate_hz, estimation.pose[FUSED, :, :2], log.pose, t_s)
 
 
 def _in_box(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
