@@ -34,6 +34,7 @@ from localization.dead_reckoning import (
     initial_belief,
     odometry_data,
 )
+from localization.dead_reckoning_kernel import N_MEASUREMENTS
 from localization.fusion import fuse
 from localization.localizer import (
     BRANCHES,
@@ -49,6 +50,7 @@ from scenarios.metrics import (
     RECOVERY_HOLD_S,
     consistency_stats,
     interval_stats,
+    nees_stats,
     recovery_time_s,
     rmse_heading_rad,
     rmse_position_m,
@@ -114,11 +116,13 @@ class Estimation:
     and after the fusion; ``fused_box (E, 3, 2)``: the box the fusion used (the hull of the
     outer boxes of the component nearest the estimate, as ``localization.fusion`` takes it;
     NaN where the epoch does not clamp); ``component (E,)``: that component's label (-1: no
-    fusion at the epoch).
+    fusion at the epoch); ``nis (2, N)``: the normalised innovation squared of each branch's
+    measurement update (encoders and gyro, 3 degrees of freedom) at every sample (NaN at 0).
     """
 
     pose: np.ndarray
     pose_cov: np.ndarray
+    nis: np.ndarray
     epochs: EpochLog
     epoch_index: np.ndarray
     before: np.ndarray
@@ -269,6 +273,7 @@ def gathered(localizer: OnlineLocalizer, log: SensorData) -> tuple[Estimation, S
     estimation = Estimation(
         pose=np.ascontiguousarray(history.mean[:, :, :3].swapaxes(0, 1)),
         pose_cov=np.ascontiguousarray(history.pose_cov.swapaxes(0, 1)),
+        nis=np.ascontiguousarray(history.nis.swapaxes(0, 1)),
         epochs=EpochLog.collect(
             np.array([r.t_s for r in records]),
             [r.result for r in records],
@@ -341,6 +346,7 @@ def estimate_offline(
     estimation = Estimation(
         pose=np.ascontiguousarray(history.mean[:, :, :3].swapaxes(0, 1)),
         pose_cov=np.ascontiguousarray(history.pose_cov.swapaxes(0, 1)),
+        nis=np.ascontiguousarray(history.nis.swapaxes(0, 1)),
         epochs=EpochLog.collect(log.sonar_t_s[scans], results, log.sonar_pose[scans]),
         epoch_index=epoch_index.astype(np.int64),
         before=np.array(before) if before else empty,
@@ -391,6 +397,9 @@ def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any
         if rmse_pos["ukf_only"] > 0
         else None,
         "nees": consistency_stats(estimation.pose, estimation.pose_cov, truth, BRANCHES),
+        "nis": {
+            name: nees_stats(estimation.nis[b], N_MEASUREMENTS) for b, name in enumerate(BRANCHES)
+        },
         **interval_stats(estimation.epochs),
         "fusion": {
             "clamped_epochs": int(clamped.sum()),
