@@ -307,8 +307,21 @@ def write_recording(
     truncated file could not be told from a complete one. Here a failed write raises an
     ``OSError`` naming ``path``.
     """
-    recording_id = f"{spec.name}-seed{spec.run.seed}"
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    write_bytes(path, recording_bytes(spec, log, estimation))
+    verify_recording(path, recording_id(spec))
+
+
+def recording_id(spec: ScenarioSpec) -> str:
+    """The recording's id: the scenario's name and seed."""
+    return f"{spec.name}-seed{spec.run.seed}"
+
+
+def recording_bytes(
+    spec: ScenarioSpec, log: SimulationLog, estimation: AnyEstimation | None = None
+) -> bytes:
+    """The ``.rrd`` bytes of the recording :func:`write_recording` writes (encoded in
+    memory; a campaign's worker sends them to the process that writes its folder)."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
     stream = rr.binary_stream(rec)
     rec.send_blueprint(
         default_blueprint(spec.map.bounds, epoch_axis(estimation)),
@@ -319,8 +332,7 @@ def write_recording(
     rec.flush()
     rec.disconnect()
     data = stream.read()
-    write_bytes(path, b"" if data is None else data)
-    verify_recording(path, recording_id)
+    return b"" if data is None else data
 
 
 def verify_recording(path: str | Path, recording_id: str) -> None:
@@ -355,7 +367,7 @@ def stream_recording(
     """Send the same recording, with the same blueprint, to a live viewer: a new one
     (``spawn``: rerun's viewer started and connected to) or a running one at ``connect_url``
     (a ``rerun+http://host:port/proxy`` URL, see :func:`viewer_url`)."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
     blueprint = default_blueprint(spec.map.bounds, epoch_axis(estimation))
     if spawn:
         rec.spawn(default_blueprint=blueprint)
