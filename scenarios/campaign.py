@@ -686,11 +686,47 @@ def main(args: argparse.Namespace) -> int:
             raise ScenarioError(None, option, f"must be at least 1, got {value}")
     folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
     folder.prepare(campaign, args.resume)
+    finished = run_campaign(
+        campaign,
+        folder,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        cluster=args.cluster,
+        batch=args.batch,
+    )
+    if not finished:
+        left = len(campaign.runs) - len(folder.done_keys())
+        print(
+            f"robotsim: a worker process died; {left} run(s) not done: "
+            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
+            file=sys.stderr,
+        )
+        return 1
+    results = folder.merge(campaign)
+    failed = _failed_count(results)
+    print(f"campaign {campaign.name}: {len(campaign.runs)} runs, {failed} failed; wrote {results}")
+    return 1 if failed else 0
+
+
+def run_campaign(
+    campaign: Campaign,
+    folder: ResultsFolder,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    cluster: str | None = None,
+    batch: int | None = None,
+) -> bool:
+    """Run the runs of ``campaign`` without a part in the prepared ``folder``, committing
+    each row as it comes, with the progress on stderr: on a local pool of ``workers``
+    processes (default: every core), or on dask (``scheduler`` address, or ``cluster =
+    "local"``), ``batch`` runs per task. Returns False when a worker process died (its runs
+    stay missing, for a resume), True when every run has its part."""
     done = folder.done_keys()
     missing = [run for run in campaign.runs if run.key not in done]
-    workers = args.workers or os.cpu_count() or 1
-    on_dask = args.scheduler is not None or args.cluster is not None
-    batch = args.batch or (
+    workers = workers or os.cpu_count() or 1
+    on_dask = scheduler is not None or cluster is not None
+    batch = batch or (
         min(MAX_DASK_BATCH, max(1, math.ceil(len(missing) / (TASKS_PER_WORKER * workers))))
         if on_dask
         else LOCAL_BATCH
@@ -710,30 +746,20 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         if missing:
-            if args.scheduler is None:
+            if scheduler is None:
                 warm_up(missing)
             batches = batched(missing, batch)
             if on_dask:
-                execute_dask(batches, args.scheduler, workers, sink)
+                execute_dask(batches, scheduler, workers, sink)
             else:
                 execute_local(batches, workers, sink)
     except BrokenProcessPool:
         # a worker process died (out of memory, killed): the runs it had are not recorded as
         # failures, since they did not fail on their own; they stay missing for --resume
-        progress.close()
-        left = len(campaign.runs) - len(folder.done_keys())
-        print(
-            f"robotsim: a worker process died; {left} run(s) not done: "
-            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
-            file=sys.stderr,
-        )
-        return 1
+        return False
     finally:
         progress.close()
-    results = folder.merge(campaign)
-    failed = _failed_count(results)
-    print(f"campaign {campaign.name}: {total} runs, {failed} failed; wrote {results}")
-    return 1 if failed else 0
+    return True
 
 
 def _failed_count(results: Path) -> int:
