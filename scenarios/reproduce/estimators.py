@@ -84,7 +84,10 @@ MCL_SETTINGS = {"max_particles": 10000, "recovery_alpha_slow": 0.001, "recovery_
 CAMPAIGN_SEED = 2026
 DEFAULT_SEEDS = 20
 DEFAULT_DURATION_S = 300.0
-QUICK = {"scenarios": ("hall",), "seeds": 2, "duration_s": 20.0}
+#: ``--quick``: the plans, seeds and duration of the smoke test.
+QUICK_SCENARIOS = ("hall",)
+QUICK_SEEDS = 2
+QUICK_DURATION_S = 20.0
 
 CAMPAIGN_NAME = "estimators"
 
@@ -119,8 +122,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help=f"a smoke test: {', '.join(QUICK['scenarios'])}, {QUICK['seeds']} seeds, "
-        f"{QUICK['duration_s']:g} s (options given still apply)",
+        help=f"a smoke test: {', '.join(QUICK_SCENARIOS)}, {QUICK_SEEDS} seeds, "
+        f"{QUICK_DURATION_S:g} s (options given still apply)",
     )
 
 
@@ -379,9 +382,9 @@ def table_figure(records: list[dict[str, Any]], path: Path) -> None:
 # ---------------------------------------------------------------------------------------
 def main(args: argparse.Namespace) -> int:
     """Build and run the campaign; write its table, report and the estimators table."""
-    names = tuple(args.scenarios or (QUICK["scenarios"] if args.quick else SCENARIOS))
-    seeds = args.seeds or (QUICK["seeds"] if args.quick else DEFAULT_SEEDS)
-    duration_s = args.duration or (QUICK["duration_s"] if args.quick else DEFAULT_DURATION_S)
+    names = tuple(args.scenarios or (QUICK_SCENARIOS if args.quick else SCENARIOS))
+    seeds = args.seeds or (QUICK_SEEDS if args.quick else DEFAULT_SEEDS)
+    duration_s = args.duration or (QUICK_DURATION_S if args.quick else DEFAULT_DURATION_S)
     for option, value in (("--seeds", seeds), ("--workers", args.workers)):
         if value is not None and value < 1:
             raise ScenarioError(None, option, f"must be at least 1, got {value}")
