@@ -35,19 +35,21 @@ def campaign_text(runs: int, duration_s: float) -> str:
     return f'scenarios = ["hall"]\nseed = 1\nseeds = {{ first = 0, count = {runs} }}\nduration_s = {duration_s}\n'
 
 
-def throughput(campaign: cm.Campaign, executor: str, workers: int) -> tuple[float, float]:
+def throughput(campaign: cm.Campaign, executor: str, workers: int) -> tuple[float, float, float]:
     """Simulated seconds per wall second of the whole campaign on ``executor`` (workers'
-    start included), and the seconds to the first committed row (mostly that start)."""
+    start included), the seconds to the first committed batch (mostly that start), and the
+    steady throughput: the simulated seconds committed after the first batch per wall second
+    from the first batch to the last (the scheduling cost without the start)."""
     with tempfile.TemporaryDirectory() as folder_name:
         folder = cm.ResultsFolder(Path(folder_name) / "out")
         folder.prepare(campaign, resume=False)
 
-        first_row: list[float] = []
+        committed: list[tuple[float, float]] = []  # (time, simulated seconds) per batch
 
         def sink(rows):
             for row in rows:
                 folder.commit(row)
-            first_row.append(time.perf_counter())
+            committed.append((time.perf_counter(), sum(row["duration_s"] for row in rows)))
 
         start = time.perf_counter()
         if executor == "pool":
@@ -60,7 +62,10 @@ def throughput(campaign: cm.Campaign, executor: str, workers: int) -> tuple[floa
             cm.execute_dask(cm.batched(campaign.runs, size), None, workers, sink)
         wall_s = time.perf_counter() - start
     simulated = sum(run.spec.run.duration_s for run in campaign.runs)
-    return simulated / wall_s, first_row[0] - start
+    (first_t, _), (last_t, _) = committed[0], committed[-1]
+    after_first = sum(seconds for _, seconds in committed[1:])
+    steady = after_first / (last_t - first_t) if last_t > first_t else float("nan")
+    return simulated / wall_s, first_t - start, steady
 
 
 def main() -> int:
@@ -81,13 +86,16 @@ def main() -> int:
     for workers in args.workers:
         found: dict[str, list[float]] = {"pool": [], "dask": []}
         first: dict[str, list[float]] = {"pool": [], "dask": []}
+        steady: dict[str, list[float]] = {"pool": [], "dask": []}
         for round_ in range(args.rounds):
             order = ("pool", "dask") if round_ % 2 == 0 else ("dask", "pool")
             for executor in order:
-                rate, first_s = throughput(campaign, executor, workers)
+                rate, first_s, steady_rate = throughput(campaign, executor, workers)
                 found[executor].append(rate)
                 first[executor].append(first_s)
+                steady[executor].append(steady_rate)
         ratios = np.array(found["pool"]) / np.array(found["dask"])
+        steady_ratios = np.array(steady["pool"]) / np.array(steady["dask"])
         table.append(
             [
                 str(workers),
@@ -98,6 +106,10 @@ def main() -> int:
                 f"{(np.median(ratios) - 1) * 100:+.0f} % (rounds: "
                 + ", ".join(f"{(r - 1) * 100:+.0f} %" for r in ratios)
                 + ")",
+                " / ".join(f"{v:.1f}" for v in steady["pool"])
+                + " vs "
+                + " / ".join(f"{v:.1f}" for v in steady["dask"])
+                + f": {(np.median(steady_ratios) - 1) * 100:+.0f} %",
             ]
         )
     load_after = os.getloadavg()
@@ -106,6 +118,7 @@ def main() -> int:
         "pool: sim s / wall s per round (first row after, median)",
         "dask LocalCluster: sim s / wall s per round (first row after, median)",
         "dask overhead, median of the rounds' ratios",
+        "after the first batch: pool vs dask sim s / wall s, overhead",
     ]
     body = (
         f"`python benchmarks/campaign.py --runs {args.runs} --duration {args.duration:g} "
@@ -114,7 +127,8 @@ def main() -> int:
         f"pool and on a dask `LocalCluster` of the same number of worker processes, "
         f"alternating (the order swapped every round). Throughput: simulated seconds per wall "
         f"second, from the first task submitted to the last row committed, the workers' start "
-        f"included. Load average (1, 5, 15 min) before {_load(load_before)}, after "
+        f"included; the last column leaves out the workers' start (from the first committed "
+        f"batch to the last). Load average (1, 5, 15 min) before {_load(load_before)}, after "
         f"{_load(load_after)}: the machine was shared with other jobs, so the rounds differ "
         f"by more than the executors do. {machine_line('numba', 'distributed', 'pyarrow')}."
         f"\n\n{markdown_table(header, table)}"
