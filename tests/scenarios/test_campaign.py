@@ -21,6 +21,7 @@ from scenarios import campaign as campaign_module
 from scenarios.cli import EXIT_USER_ERROR, main
 from scenarios.runner import run_scenario
 from scenarios.spec import load_scenario
+from tests.helpers import recording_columns
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -304,9 +305,7 @@ def test_record_failures_writes_recordings_for_the_failed_runs_only(tmp_path):
     assert [r["recording"] for r in table] == [None, name, None, None]
     assert sorted(p.name for p in (out / "recordings").iterdir()) == [f"{campaign.runs[1].key}.rrd"]
     # the failed run's world, truth and sensors, read back; no estimates (it has none)
-    from tests.scenarios.test_recording import entity_columns
-
-    entities = {entity for entity, _ in entity_columns(out / name)}
+    entities = {entity for entity, _ in recording_columns(out / name)}
     assert "/world/robot/footprint" in entities and "/world/sonar/echoes" in entities
     assert not any(entity.startswith("/world/estimates") for entity in entities)
 

@@ -22,7 +22,7 @@ from scenarios.errors import ScenarioError
 from scenarios.mcl_pipeline import MCL_BRANCH, Estimator, MclEstimation, carried_poses
 from scenarios.runner import run_scenario
 from scenarios.spec import load_scenario, parse_scenario
-from tests.scenarios.test_recording import annotation_classes, entity_columns
+from tests.helpers import annotation_labels, recording_columns
 
 ROBOTSIM = str(Path(sys.executable).with_name("robotsim"))
 
@@ -205,7 +205,7 @@ def test_robotsim_run_with_mcl_writes_a_recording_with_the_particles_and_the_mcl
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "m.json").read_text())
     assert summary["estimator"] == "mcl" and summary["rmse_position_m"]["mcl"] < 1.0
-    data = entity_columns(tmp_path / "m.rrd")
+    data = recording_columns(tmp_path / "m.rrd")
     updates = summary["mcl"]["updates"]
     particles = data[("/world/mcl/particles", False)]["Points2D:positions"]
     assert len(particles) == updates + 1  # the prior and every update
@@ -213,8 +213,7 @@ def test_robotsim_run_with_mcl_writes_a_recording_with_the_particles_and_the_mcl
     for entity in ("/world/estimates/mcl/position", "/errors/position_m/mcl"):
         assert (entity, False) in data, entity
     assert ("/mcl/particles", False) in data
-    labels = {label for label, _ in annotation_classes(data).values()}
-    assert "MCL" in labels
+    assert "MCL" in annotation_labels(data)
     assert not any(entity.startswith("/world/intervals") for entity, _ in data)
 
 
