@@ -324,7 +324,7 @@ def recording_bytes(
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
     stream = rr.binary_stream(rec)
     rec.send_blueprint(
-        default_blueprint(spec.map.bounds, epoch_axis(estimation)),
+        default_blueprint(spec.map.bounds, epoch_axis(estimation), estimate_names(estimation)),
         make_active=False,
         make_default=True,
     )
@@ -368,7 +368,9 @@ def stream_recording(
     (``spawn``: rerun's viewer started and connected to) or a running one at ``connect_url``
     (a ``rerun+http://host:port/proxy`` URL, see :func:`viewer_url`)."""
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
-    blueprint = default_blueprint(spec.map.bounds, epoch_axis(estimation))
+    blueprint = default_blueprint(
+        spec.map.bounds, epoch_axis(estimation), estimate_names(estimation)
+    )
     if spawn:
         rec.spawn(default_blueprint=blueprint)
     else:
@@ -414,6 +416,12 @@ def map_view_bounds(bounds: np.ndarray) -> tuple[tuple[float, float], tuple[floa
     return (x0 - MAP_MARGIN_M, x1 + MAP_MARGIN_M), (-(y1 + MAP_MARGIN_M), -bottom)
 
 
+def estimate_names(estimation: AnyEstimation | None) -> tuple[str, ...]:
+    """The estimates a recording of ``estimation`` draws: the particle filter's, or the
+    interval pipeline's branches (also drawn for no estimation: their overrides are harmless)."""
+    return (MCL_BRANCH,) if isinstance(estimation, MclEstimation) else BRANCHES
+
+
 def epoch_axis(estimation: AnyEstimation | None) -> tuple[float, float] | None:
     """The epoch-time plot's axis, ms: up to ``EPOCH_AXIS_FACTOR`` times the 95th percentile
     of the epoch times, so that a few slow epochs (the global localisation) do not flatten
@@ -430,11 +438,14 @@ def epoch_axis(estimation: AnyEstimation | None) -> tuple[float, float] | None:
 
 
 def default_blueprint(
-    bounds: np.ndarray, epoch_ms_range: tuple[float, float] | None = None
+    bounds: np.ndarray,
+    epoch_ms_range: tuple[float, float] | None = None,
+    estimates: tuple[str, ...] = BRANCHES,
 ) -> rrb.Blueprint:
     """The map (y up, fixed to the map ``bounds (2, 2)``) beside tabs of plots: the
     localisation figures grouped by unit (the epoch time on ``epoch_ms_range``, see
-    :func:`epoch_axis`), the raw sensors, and the notes."""
+    :func:`epoch_axis`), the raw sensors, and the notes; ``estimates``: the estimates drawn
+    (:func:`estimate_names`), whose trails and paths the map view styles."""
     x_range, y_range = map_view_bounds(bounds)
     cursor = rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)
     trail_window = rrb.VisibleTimeRanges(
@@ -442,7 +453,6 @@ def default_blueprint(
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRAIL_WINDOW_S),
         end=cursor,
     )
-    estimates = (*BRANCHES, MCL_BRANCH)
     trails = [f"{WORLD}/robot/trail"] + [f"{WORLD}/estimates/{b}/trail" for b in estimates]
     paths = [f"{WORLD}/robot/path"] + [f"{WORLD}/estimates/{b}/path" for b in estimates]
     overrides: dict = dict.fromkeys(trails, trail_window)
