@@ -506,10 +506,14 @@ class DeadReckoningHistory:
         mean: ``(count, B, 8)`` state means (heading wrapped).
         cov: ``(count, B, c, c)`` the covariance of the first ``c`` states: ``c = 3`` (the
             pose, default) or ``c = 8`` (the whole state, ``record_full_cov=True``).
+        nis: ``(count, B)`` the normalised innovation squared ``nu^T S^-1 nu`` of the
+            measurement update at each sample (3 degrees of freedom: ``v_enc``, ``omega_enc``,
+            gyro); NaN at sample 0 (the initial belief, no update).
     """
 
     mean: np.ndarray
     cov: np.ndarray
+    nis: np.ndarray
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -567,6 +571,7 @@ class DeadReckoning:
         self._mean_hist = np.empty((count, batch, N_STATES))
         recorded = N_STATES if record_full_cov else 3
         self._cov_hist = np.empty((count, batch, recorded, recorded))
+        self._nis_hist = np.full((count, batch), np.nan)
         self._mean = np.array(initial.mean)
         self._cov = np.array(initial.cov)
         self._record(0)
@@ -590,7 +595,9 @@ class DeadReckoning:
     def history(self) -> DeadReckoningHistory:
         """Rows ``0..index`` of the recorded history (views of the preallocated arrays)."""
         end = self.index + 1
-        return DeadReckoningHistory(self._mean_hist[:end], self._cov_hist[:end])
+        return DeadReckoningHistory(
+            self._mean_hist[:end], self._cov_hist[:end], self._nis_hist[:end]
+        )
 
     def replace(self, belief: Gaussian) -> None:
         """Replace the current belief (e.g. by the fused one) and re-record the current row.
@@ -642,6 +649,7 @@ class DeadReckoning:
             self._buffers = (accel, z)
             self._mean_hist = _grown(self._mean_hist, capacity)
             self._cov_hist = _grown(self._cov_hist, capacity)
+            self._nis_hist = _grown(self._nis_hist, capacity)
         accel, z = self._buffers
         accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
         self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
@@ -673,6 +681,7 @@ class DeadReckoning:
                     until_index + 1,
                     self._mean_hist,
                     self._cov_hist,
+                    self._nis_hist,
                 )
             else:
                 self._run_generic(start, until_index + 1)
@@ -691,6 +700,7 @@ class DeadReckoning:
             regressor = np.array(predicted.mean)
             regressor[:, V] -= self._speed_correction
             h = measurement_matrix(regressor, data.wheel_base_m)
+            self._nis_hist[k] = innovation_nis(predicted, z, h, data.R)
             belief = filt.update(predicted, z, self._measurement, h)
             self._speed_correction = belief.mean[:, V] - predicted.mean[:, V]
             self._mean, self._cov = belief.mean, belief.cov
@@ -701,6 +711,16 @@ class DeadReckoning:
         self._mean_hist[k, :, THETA] = wrap_angle(self._mean[:, THETA])
         recorded = self._cov_hist.shape[-1]
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
+
+
+def innovation_nis(
+    predicted: Gaussian, z: np.ndarray, h: np.ndarray, r_cov: np.ndarray
+) -> np.ndarray:
+    """``(B,)`` the NIS ``nu^T S^-1 nu`` of the linear update of ``predicted (B, 8)`` by
+    ``z (B, 3)`` with ``h (B, 3, 8)``: ``nu = z - H x-``, ``S = H P- H^T + R``."""
+    nu = z - np.einsum("bij,bj->bi", h, predicted.mean)
+    s_cov = h @ predicted.cov @ h.mT + r_cov
+    return np.einsum("bi,bi->b", nu, np.linalg.solve(s_cov, nu[..., None])[..., 0])
 
 
 def _compiled_input(values) -> np.ndarray:
@@ -749,7 +769,7 @@ class _CompiledStep:
         self.accel = _compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
         self.z = _compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
 
-    def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist):
+    def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist, nis_hist):
         """Samples ``start..stop-1`` from the belief ``mean (B, 8)``, ``cov (B, 8, 8)`` at
         ``start - 1`` (left unchanged); records rows ``start..stop-1`` of the history arrays
         and returns the new ``(mean, cov, speed_correction)``."""
@@ -773,6 +793,7 @@ class _CompiledStep:
             self.wrap_offsets,
             mean_hist,
             cov_hist,
+            nis_hist,
         )
         if failed >= 0:
             raise EstimationError(

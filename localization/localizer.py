@@ -311,7 +311,9 @@ class OnlineLocalizer:
         self.belief()
         if self._dr is None:
             mean, cov = self._initial.mean[None], self._initial.cov[None, :, :3, :3]
-            return DeadReckoningHistory(np.array(mean[:0]), np.array(cov[:0]))
+            return DeadReckoningHistory(
+                np.array(mean[:0]), np.array(cov[:0]), np.zeros((0, mean.shape[1]))
+            )
         return self._dr.history
 
     # ------------------------------------------------------------------ the dead reckoning

@@ -6,6 +6,7 @@ A campaign file (TOML) names what to run::
     seed = 2026                                # the campaign seed (default 0)
     seeds = { first = 0, count = 20 }          # the replicates (the seed range)
     duration_s = 60.0                          # optional: every run's duration, seconds
+    record = "failures"                        # optional: "none", "failures", "all" or a count
 
     [grid]                                     # optional: settings overrides, every combination
     "estimation.fusion" = ["clamp", "truncated"]
@@ -51,6 +52,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -74,6 +76,23 @@ MANIFEST_FILE = "campaign.json"
 
 #: The most runs a campaign may have (a typo in a range must not queue a billion runs).
 MAX_RUNS = 1_000_000
+
+#: The recordings of the runs (``record = ...``): ``recordings/<run key>.rrd``.
+RECORDINGS_DIR = "recordings"
+#: The row key under which a worker hands a run's recording (bytes) to the writer.
+RECORDING_BYTES = "_recording_bytes"
+
+
+class Record(StrEnum):
+    """Which runs of a campaign get a recording (``record``; an integer: that many runs,
+    drawn from the campaign seed)."""
+
+    NONE = "none"
+    FAILURES = "failures"
+    """The runs that failed (the simulation recorded without estimates, when it runs) and
+    the runs that broke their own guarantee (``scenarios.commands.guarantee_failure``)."""
+    ALL = "all"
+
 
 #: The grid keys outside ``[estimation]`` a campaign may vary.
 RUN_KEYS = ("run.duration_s",)
@@ -105,6 +124,8 @@ class CampaignRun:
     settings: dict[str, Any]
     """The grid point: ``{"estimation.fusion": "clamp", ...}`` (empty without a grid)."""
     spec: ScenarioSpec
+    record: Record = Record.NONE
+    """Whether this run is recorded: ``ALL`` (always), ``FAILURES`` (if it fails) or not."""
 
     @property
     def key(self) -> str:
@@ -161,12 +182,14 @@ def load_campaign(path: str | Path) -> Campaign:
     count = seeds.take_int("count", minimum=1)
     seeds.finish()
     duration_s = top.take_float("duration_s", None, above=0.0)
+    record = top.take_raw("record", str(Record.NONE))
     grid = _read_grid(source, top.take_raw("grid", {}))
     top.finish()
 
     total = len(names) * count * math.prod(len(v) for v in grid.values())
     if total > MAX_RUNS:
         raise ScenarioError(source, "seeds.count", f"{total} runs, more than {MAX_RUNS}")
+    recorded = _recorded_runs(source, record, total, seed)
     base_dir = path.parent
     specs = []
     for i, name in enumerate(names):
@@ -193,9 +216,28 @@ def load_campaign(path: str | Path) -> Campaign:
                         replicate=replicate,
                         settings=point,
                         spec=spec,
+                        record=recorded(len(runs)),
                     )
                 )
     return Campaign(path.stem, source, seed, tuple(runs))
+
+
+def _recorded_runs(source: str, record: object, total: int, seed: int) -> Callable[[int], Record]:
+    """Which runs ``record`` asks to record, as ``run index -> Record``: a :class:`Record`
+    name, or a number of runs from 1 to ``total`` drawn without replacement with the
+    campaign ``seed`` (the same runs on every ``--resume``)."""
+    if isinstance(record, str) and record in set(Record):
+        mode = Record(record)
+        return lambda index: mode
+    if isinstance(record, int) and not isinstance(record, bool) and 1 <= record <= total:
+        chosen = set(np.random.default_rng(seed).choice(total, record, replace=False).tolist())
+        return lambda index: Record.ALL if index in chosen else Record.NONE
+    raise ScenarioError(
+        source,
+        "record",
+        f"must be one of {', '.join(repr(str(r)) for r in Record)} or a number of runs from 1 "
+        f"to {total}, got {record!r}",
+    )
 
 
 def _take_strings(table: Table, name: str) -> list[str]:
@@ -313,29 +355,53 @@ def run_columns(run: CampaignRun) -> dict[str, Any]:
 
 def run_one(run: CampaignRun) -> dict[str, Any]:
     """Run ``run`` with ``scenarios.runner.run_scenario``; its row: the run's columns, its
-    ``status`` and ``error``, its flattened summary and its ``timing.*`` (wall and CPU
-    seconds, CPU milliseconds per interval epoch, simulated seconds per wall second)."""
+    ``status`` and ``error``, ``guarantee`` (why it broke its own guarantee, or None), its
+    flattened summary and its ``timing.*`` (wall and CPU seconds, CPU milliseconds per
+    epoch, simulated seconds per wall second); and, when the run is to be recorded, its
+    recording's bytes under :data:`RECORDING_BYTES` (taken out by the writer)."""
+    from scenarios.commands import guarantee_failure
     from scenarios.runner import run_scenario
 
-    row = run_columns(run)
+    row = {**run_columns(run), "recording": None}
     wall_start, cpu_start = time.perf_counter(), time.process_time()
     try:
         result = run_scenario(run.spec)
     except Exception as exc:  # any failure of one run is recorded; the campaign goes on
-        return {**row, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+        row.update(status="failed", error=f"{type(exc).__name__}: {exc}", guarantee=None)
+        if run.record != Record.NONE:
+            row[RECORDING_BYTES] = _failed_run_recording(run)
+        return row
     wall_s = time.perf_counter() - wall_start
     cpu_s = time.process_time() - cpu_start
     epochs = result.summary.get("epochs") or 0
+    broken = guarantee_failure(run.spec, result.summary)
+    if run.record == Record.ALL or (run.record == Record.FAILURES and broken):
+        from scenarios.recording import recording_bytes
+
+        row[RECORDING_BYTES] = recording_bytes(run.spec, result.log, result.estimation)
     return {
         **row,
         "status": "ok",
         "error": None,
+        "guarantee": broken,
         **flatten(result.summary),
         "timing.wall_s": wall_s,
         "timing.cpu_s": cpu_s,
         "timing.cpu_per_epoch_ms": cpu_s / epochs * 1e3 if epochs else None,
         "timing.realtime_factor": run.spec.run.duration_s / wall_s if wall_s > 0 else None,
     }
+
+
+def _failed_run_recording(run: CampaignRun) -> bytes | None:
+    """The recording of a run that failed: its simulation (truth and sensors) without
+    estimates, or None when the simulation itself fails."""
+    from scenarios.recording import recording_bytes
+    from scenarios.runner import simulate_spec
+
+    try:
+        return recording_bytes(run.spec, simulate_spec(run.spec))
+    except Exception:  # the failure is in the row already; no recording to add
+        return None
 
 
 def run_batch(runs: Sequence[CampaignRun]) -> list[dict[str, Any]]:
@@ -355,6 +421,7 @@ class ResultsFolder:
     def __init__(self, path: Path):
         self.path = path
         self.parts = path / PARTS_DIR
+        self.recordings = path / RECORDINGS_DIR
 
     def prepare(self, campaign: Campaign, resume: bool) -> None:
         """Check the folder can take this campaign; without ``resume`` it must be new or
@@ -374,7 +441,7 @@ class ResultsFolder:
         if reason is not None:
             raise ScenarioError(None, "--out", reason)
         self.parts.mkdir(parents=True, exist_ok=True)
-        for leftover in self.parts.glob(".*.part"):
+        for leftover in [*self.parts.glob(".*.part"), *self.recordings.glob(".*.part")]:
             leftover.unlink()
         if not manifest.is_file():
             outputs.write_json(
@@ -387,10 +454,22 @@ class ResultsFolder:
         return {part.name[: -len(".parquet")] for part in self.parts.glob("*.parquet")}
 
     def commit(self, row: dict[str, Any]) -> None:
-        """Write one run's row as its part, atomically (a temporary name, then a rename)."""
+        """Write one run's row as its part, atomically (a temporary name, then a rename);
+        its recording first, if it has one (``recordings/<run key>.rrd``, read back before
+        it is moved into place), so that a run with a part has its recording."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
+        data = row.pop(RECORDING_BYTES, None)
+        if data is not None:
+            from scenarios.recording import verify_recording
+
+            self.recordings.mkdir(exist_ok=True)
+            name = f"{RECORDINGS_DIR}/{row['run_key']}.rrd"
+            with outputs.atomic_path(self.path / name) as tmp:
+                outputs.write_bytes(tmp, data)
+                verify_recording(tmp, f"{row['scenario']}-seed{row['seed']}")
+            row["recording"] = name
         with outputs.atomic_path(self.parts / f"{row['run_key']}.parquet") as tmp:
             pq.write_table(pa.Table.from_pylist([row]), tmp)
 
@@ -610,11 +689,47 @@ def main(args: argparse.Namespace) -> int:
             raise ScenarioError(None, option, f"must be at least 1, got {value}")
     folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
     folder.prepare(campaign, args.resume)
+    finished = run_campaign(
+        campaign,
+        folder,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        cluster=args.cluster,
+        batch=args.batch,
+    )
+    if not finished:
+        left = len(campaign.runs) - len(folder.done_keys())
+        print(
+            f"robotsim: a worker process died; {left} run(s) not done: "
+            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
+            file=sys.stderr,
+        )
+        return 1
+    results = folder.merge(campaign)
+    failed = _failed_count(results)
+    print(f"campaign {campaign.name}: {len(campaign.runs)} runs, {failed} failed; wrote {results}")
+    return 1 if failed else 0
+
+
+def run_campaign(
+    campaign: Campaign,
+    folder: ResultsFolder,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    cluster: str | None = None,
+    batch: int | None = None,
+) -> bool:
+    """Run the runs of ``campaign`` without a part in the prepared ``folder``, committing
+    each row as it comes, with the progress on stderr: on a local pool of ``workers``
+    processes (default: every core), or on dask (``scheduler`` address, or ``cluster =
+    "local"``), ``batch`` runs per task. Returns False when a worker process died (its runs
+    stay missing, for a resume), True when every run has its part."""
     done = folder.done_keys()
     missing = [run for run in campaign.runs if run.key not in done]
-    workers = args.workers or os.cpu_count() or 1
-    on_dask = args.scheduler is not None or args.cluster is not None
-    batch = args.batch or (
+    workers = workers or os.cpu_count() or 1
+    on_dask = scheduler is not None or cluster is not None
+    batch = batch or (
         min(MAX_DASK_BATCH, max(1, math.ceil(len(missing) / (TASKS_PER_WORKER * workers))))
         if on_dask
         else LOCAL_BATCH
@@ -634,30 +749,20 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         if missing:
-            if args.scheduler is None:
+            if scheduler is None:
                 warm_up(missing)
             batches = batched(missing, batch)
             if on_dask:
-                execute_dask(batches, args.scheduler, workers, sink)
+                execute_dask(batches, scheduler, workers, sink)
             else:
                 execute_local(batches, workers, sink)
     except BrokenProcessPool:
         # a worker process died (out of memory, killed): the runs it had are not recorded as
         # failures, since they did not fail on their own; they stay missing for --resume
-        progress.close()
-        left = len(campaign.runs) - len(folder.done_keys())
-        print(
-            f"robotsim: a worker process died; {left} run(s) not done: "
-            f"robotsim campaign {args.campaign} --out {folder.path} --resume runs them",
-            file=sys.stderr,
-        )
-        return 1
+        return False
     finally:
         progress.close()
-    results = folder.merge(campaign)
-    failed = _failed_count(results)
-    print(f"campaign {campaign.name}: {total} runs, {failed} failed; wrote {results}")
-    return 1 if failed else 0
+    return True
 
 
 def _failed_count(results: Path) -> int:

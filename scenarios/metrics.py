@@ -253,6 +253,29 @@ def consistency_stats(
     return result
 
 
+#: Recovered: the estimate within this distance of the truth (m) for
+#: :data:`RECOVERY_HOLD_S` seconds (the Fox-Burgard-Thrun protocol).
+RECOVERY_DISTANCE_M = 0.45
+RECOVERY_HOLD_S = 10.0
+
+
+def recovery_time_s(
+    t_s: np.ndarray, rate_hz: float, position: np.ndarray, truth: np.ndarray, kidnap_t_s: float
+) -> float | None:
+    """Seconds from ``kidnap_t_s`` to the first sample from which the estimated
+    ``position (N, 2)`` stays within :data:`RECOVERY_DISTANCE_M` of ``truth (N, >= 2)`` for
+    :data:`RECOVERY_HOLD_S` (None: not within the run); ``t_s (N,)`` the sample times."""
+    start = int(np.searchsorted(t_s, kidnap_t_s - 0.5 / rate_hz))
+    hold = round(RECOVERY_HOLD_S * rate_hz)
+    error = np.linalg.norm(position[:, :2] - truth[:, :2], axis=1)
+    misses = np.concatenate([[0], np.cumsum(error > RECOVERY_DISTANCE_M)])  # misses before k
+    first = np.arange(start, len(error) - hold + 1)
+    clean = misses[first + hold] == misses[first]  # no miss in [k, k + hold)
+    if not clean.any():
+        return None
+    return float((first[np.argmax(clean)] - start) / rate_hz)
+
+
 #: A waypoint is reached when the true position comes this close to it, m (the accuracy
 #: threshold of the Fox-Burgard-Thrun recovery protocol: the robot is where it means to be
 #: up to its localisation).

@@ -34,6 +34,7 @@ from localization.dead_reckoning import (
     initial_belief,
     odometry_data,
 )
+from localization.dead_reckoning_kernel import N_MEASUREMENTS
 from localization.fusion import fuse
 from localization.localizer import (
     BRANCHES,
@@ -45,8 +46,12 @@ from localization.localizer import (
 )
 from scenarios.epochs import EpochLog, EpochRunner
 from scenarios.metrics import (
+    RECOVERY_DISTANCE_M,
+    RECOVERY_HOLD_S,
     consistency_stats,
     interval_stats,
+    nees_stats,
+    recovery_time_s,
     rmse_heading_rad,
     rmse_position_m,
 )
@@ -55,6 +60,8 @@ from scenarios.spec import ScenarioSpec
 __all__ = [
     "BRANCHES",
     "FUSED",
+    "RECOVERY_DISTANCE_M",
+    "RECOVERY_HOLD_S",
     "START_POSE_STD",
     "UKF_ONLY",
     "Estimation",
@@ -109,11 +116,13 @@ class Estimation:
     and after the fusion; ``fused_box (E, 3, 2)``: the box the fusion used (the hull of the
     outer boxes of the component nearest the estimate, as ``localization.fusion`` takes it;
     NaN where the epoch does not clamp); ``component (E,)``: that component's label (-1: no
-    fusion at the epoch).
+    fusion at the epoch); ``nis (2, N)``: the normalised innovation squared of each branch's
+    measurement update (encoders and gyro, 3 degrees of freedom) at every sample (NaN at 0).
     """
 
     pose: np.ndarray
     pose_cov: np.ndarray
+    nis: np.ndarray
     epochs: EpochLog
     epoch_index: np.ndarray
     before: np.ndarray
@@ -133,6 +142,8 @@ class StageTimes:
     dr_step_us: np.ndarray
     """Wall time per dead-reckoning step (both branches), one value per stretch run,
     microseconds."""
+    mcl_s: float = 0.0
+    """The particle filter's wall time (``estimator = "mcl"``; then the others are 0)."""
 
 
 def dead_reckoning_noise(spec: ScenarioSpec) -> DeadReckoningNoise:
@@ -262,6 +273,7 @@ def gathered(localizer: OnlineLocalizer, log: SensorData) -> tuple[Estimation, S
     estimation = Estimation(
         pose=np.ascontiguousarray(history.mean[:, :, :3].swapaxes(0, 1)),
         pose_cov=np.ascontiguousarray(history.pose_cov.swapaxes(0, 1)),
+        nis=np.ascontiguousarray(history.nis.swapaxes(0, 1)),
         epochs=EpochLog.collect(
             np.array([r.t_s for r in records]),
             [r.result for r in records],
@@ -334,6 +346,7 @@ def estimate_offline(
     estimation = Estimation(
         pose=np.ascontiguousarray(history.mean[:, :, :3].swapaxes(0, 1)),
         pose_cov=np.ascontiguousarray(history.pose_cov.swapaxes(0, 1)),
+        nis=np.ascontiguousarray(history.nis.swapaxes(0, 1)),
         epochs=EpochLog.collect(log.sonar_t_s[scans], results, log.sonar_pose[scans]),
         epoch_index=epoch_index.astype(np.int64),
         before=np.array(before) if before else empty,
@@ -384,6 +397,9 @@ def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any
         if rmse_pos["ukf_only"] > 0
         else None,
         "nees": consistency_stats(estimation.pose, estimation.pose_cov, truth, BRANCHES),
+        "nis": {
+            name: nees_stats(estimation.nis[b], N_MEASUREMENTS) for b, name in enumerate(BRANCHES)
+        },
         **interval_stats(estimation.epochs),
         "fusion": {
             "clamped_epochs": int(clamped.sum()),
@@ -398,25 +414,10 @@ def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any
     return summary
 
 
-#: Recovered: the fused estimate within this distance of the truth (m) for
-#: :data:`RECOVERY_HOLD_S` seconds (the Fox-Burgard-Thrun protocol).
-RECOVERY_DISTANCE_M = 0.45
-RECOVERY_HOLD_S = 10.0
-
-
 def recovery_s(log: SensorData, estimation: Estimation, t_s: float) -> float | None:
-    """Seconds from ``t_s`` (a kidnapping) to the first sample from which the fused
-    position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
-    :data:`RECOVERY_HOLD_S` (None: not within the run)."""
-    start = int(np.searchsorted(log.t_s, t_s - 0.5 / log.rate_hz))
-    hold = round(RECOVERY_HOLD_S * log.rate_hz)
-    error = np.linalg.norm(estimation.pose[FUSED, :, :2] - log.pose[:, :2], axis=1)
-    misses = np.concatenate([[0], np.cumsum(error > RECOVERY_DISTANCE_M)])  # misses before k
-    first = np.arange(start, len(error) - hold + 1)
-    clean = misses[first + hold] == misses[first]  # no miss in [k, k + hold)
-    if not clean.any():
-        return None
-    return float((first[np.argmax(clean)] - start) / log.rate_hz)
+    """Seconds from ``t_s`` (a kidnapping) until the fused position is back near the truth
+    for good (:func:`scenarios.metrics.recovery_time_s`; None: not within the run)."""
+    return recovery_time_s(log.t_s, log.rate_hz, estimation.pose[FUSED, :, :2], log.pose, t_s)
 
 
 def _in_box(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:

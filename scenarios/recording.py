@@ -62,6 +62,15 @@ The localisation pipeline (when the run has an estimation):
   ``Scalars`` (E) styled by ``SeriesLines``;
 - ``errors/position_m/<branch>``, ``errors/heading_rad/<branch>``: estimation errors,
   ``Scalars`` at the same samples as the estimates, in the branch's colour.
+
+The particle filter instead (``estimator = "mcl"``, ``scenarios.mcl_pipeline``), class ``mcl``:
+
+- ``world/estimates/mcl/path``, ``.../trail``, ``.../position``, ``.../heading`` and
+  ``.../ellipse`` (its particle covariance): as a branch's;
+- ``world/mcl/particles``: the particle set after each filter update (and the prior at 0),
+  at most ``scenarios.mcl_pipeline.PARTICLES_SHOWN`` of them, ``Points2D`` (U rows);
+- ``mcl/particles``: the size of the set at each update (KLD-sampling), ``Scalars`` (U);
+- ``errors/position_m/mcl``, ``errors/heading_rad/mcl``: as a branch's.
 """
 
 from __future__ import annotations
@@ -78,6 +87,7 @@ import rerun.blueprint as rrb
 from robotsim.robot import wrap_angle
 from scenarios.epochs import STATUS
 from scenarios.errors import InternalError
+from scenarios.mcl_pipeline import MCL_BRANCH, MclEstimation
 from scenarios.outputs import write_bytes
 from scenarios.runner import BRANCHES
 
@@ -86,6 +96,8 @@ if TYPE_CHECKING:
     from robotsim.simulation import SimulationLog
     from scenarios.epochs import EpochLog
     from scenarios.runner import Estimation
+
+    AnyEstimation = Estimation | MclEstimation
     from scenarios.spec import ScenarioSpec
 
 APPLICATION_ID = "robotsim"
@@ -282,7 +294,10 @@ EPOCH_SERIES = {
 
 
 def write_recording(
-    path: str | Path, spec: ScenarioSpec, log: SimulationLog, estimation: Estimation | None = None
+    path: str | Path,
+    spec: ScenarioSpec,
+    log: SimulationLog,
+    estimation: AnyEstimation | None = None,
 ) -> None:
     """Write the recording of ``log`` (a run of ``spec``) and of its ``estimation`` (if any)
     to the ``.rrd`` file ``path``, then read it back (:func:`verify_recording`).
@@ -292,11 +307,24 @@ def write_recording(
     truncated file could not be told from a complete one. Here a failed write raises an
     ``OSError`` naming ``path``.
     """
-    recording_id = f"{spec.name}-seed{spec.run.seed}"
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    write_bytes(path, recording_bytes(spec, log, estimation))
+    verify_recording(path, recording_id(spec))
+
+
+def recording_id(spec: ScenarioSpec) -> str:
+    """The recording's id: the scenario's name and seed."""
+    return f"{spec.name}-seed{spec.run.seed}"
+
+
+def recording_bytes(
+    spec: ScenarioSpec, log: SimulationLog, estimation: AnyEstimation | None = None
+) -> bytes:
+    """The ``.rrd`` bytes of the recording :func:`write_recording` writes (encoded in
+    memory; a campaign's worker sends them to the process that writes its folder)."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
     stream = rr.binary_stream(rec)
     rec.send_blueprint(
-        default_blueprint(spec.map.bounds, epoch_axis(estimation)),
+        default_blueprint(spec.map.bounds, epoch_axis(estimation), estimate_names(estimation)),
         make_active=False,
         make_default=True,
     )
@@ -304,8 +332,7 @@ def write_recording(
     rec.flush()
     rec.disconnect()
     data = stream.read()
-    write_bytes(path, b"" if data is None else data)
-    verify_recording(path, recording_id)
+    return b"" if data is None else data
 
 
 def verify_recording(path: str | Path, recording_id: str) -> None:
@@ -332,7 +359,7 @@ def verify_recording(path: str | Path, recording_id: str) -> None:
 def stream_recording(
     spec: ScenarioSpec,
     log: SimulationLog,
-    estimation: Estimation | None = None,
+    estimation: AnyEstimation | None = None,
     *,
     spawn: bool = False,
     connect_url: str | None = None,
@@ -340,8 +367,10 @@ def stream_recording(
     """Send the same recording, with the same blueprint, to a live viewer: a new one
     (``spawn``: rerun's viewer started and connected to) or a running one at ``connect_url``
     (a ``rerun+http://host:port/proxy`` URL, see :func:`viewer_url`)."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{spec.run.seed}")
-    blueprint = default_blueprint(spec.map.bounds, epoch_axis(estimation))
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(spec))
+    blueprint = default_blueprint(
+        spec.map.bounds, epoch_axis(estimation), estimate_names(estimation)
+    )
     if spawn:
         rec.spawn(default_blueprint=blueprint)
     else:
@@ -363,10 +392,15 @@ def record_all(
     rec: rr.RecordingStream,
     spec: ScenarioSpec,
     log: SimulationLog,
-    estimation: Estimation | None = None,
+    estimation: AnyEstimation | None = None,
 ) -> None:
     """Everything the recording holds, sent to ``rec``: the frame and the classes, the run,
-    and the estimation (if any)."""
+    and the estimation (if any: the interval pipeline's or the particle filter's)."""
+    if isinstance(estimation, MclEstimation):
+        record_frame(rec, spec.map.bounds, None, mcl=True)
+        record_run(rec, spec, log)
+        record_mcl(rec, log, estimation)
+        return
     record_frame(rec, spec.map.bounds, spec.estimation.fusion if estimation is not None else None)
     record_run(rec, spec, log)
     if estimation is not None:
@@ -382,11 +416,21 @@ def map_view_bounds(bounds: np.ndarray) -> tuple[tuple[float, float], tuple[floa
     return (x0 - MAP_MARGIN_M, x1 + MAP_MARGIN_M), (-(y1 + MAP_MARGIN_M), -bottom)
 
 
-def epoch_axis(estimation: Estimation | None) -> tuple[float, float] | None:
+def estimate_names(estimation: AnyEstimation | None) -> tuple[str, ...]:
+    """The estimates a recording of ``estimation`` draws: the particle filter's, or the
+    interval pipeline's branches (also drawn for no estimation: their overrides are harmless)."""
+    return (MCL_BRANCH,) if isinstance(estimation, MclEstimation) else BRANCHES
+
+
+def epoch_axis(estimation: AnyEstimation | None) -> tuple[float, float] | None:
     """The epoch-time plot's axis, ms: up to ``EPOCH_AXIS_FACTOR`` times the 95th percentile
     of the epoch times, so that a few slow epochs (the global localisation) do not flatten
     the others; ``None`` (the viewer's own) without epochs or when nothing would be clipped."""
-    if estimation is None or len(estimation.epochs.elapsed_s) == 0:
+    if (
+        estimation is None
+        or isinstance(estimation, MclEstimation)
+        or len(estimation.epochs.elapsed_s) == 0
+    ):
         return None
     epoch_ms = estimation.epochs.elapsed_s * 1e3
     top = EPOCH_AXIS_FACTOR * float(np.percentile(epoch_ms, 95))
@@ -394,11 +438,14 @@ def epoch_axis(estimation: Estimation | None) -> tuple[float, float] | None:
 
 
 def default_blueprint(
-    bounds: np.ndarray, epoch_ms_range: tuple[float, float] | None = None
+    bounds: np.ndarray,
+    epoch_ms_range: tuple[float, float] | None = None,
+    estimates: tuple[str, ...] = BRANCHES,
 ) -> rrb.Blueprint:
     """The map (y up, fixed to the map ``bounds (2, 2)``) beside tabs of plots: the
     localisation figures grouped by unit (the epoch time on ``epoch_ms_range``, see
-    :func:`epoch_axis`), the raw sensors, and the notes."""
+    :func:`epoch_axis`), the raw sensors, and the notes; ``estimates``: the estimates drawn
+    (:func:`estimate_names`), whose trails and paths the map view styles."""
     x_range, y_range = map_view_bounds(bounds)
     cursor = rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)
     trail_window = rrb.VisibleTimeRanges(
@@ -406,8 +453,8 @@ def default_blueprint(
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRAIL_WINDOW_S),
         end=cursor,
     )
-    trails = [f"{WORLD}/robot/trail"] + [f"{WORLD}/estimates/{b}/trail" for b in BRANCHES]
-    paths = [f"{WORLD}/robot/path"] + [f"{WORLD}/estimates/{b}/path" for b in BRANCHES]
+    trails = [f"{WORLD}/robot/trail"] + [f"{WORLD}/estimates/{b}/trail" for b in estimates]
+    paths = [f"{WORLD}/robot/path"] + [f"{WORLD}/estimates/{b}/path" for b in estimates]
     overrides: dict = dict.fromkeys(trails, trail_window)
     overrides.update({path: rrb.EntityBehavior(visible=False) for path in paths})
     map_view = rrb.Spatial2DView(
@@ -494,20 +541,24 @@ def default_blueprint(
     )
 
 
-def legend_classes(fusion_rule: str | None) -> list[DrawClass]:
+def legend_classes(fusion_rule: str | None, mcl: bool = False) -> list[DrawClass]:
     """The classes the legend lists: everything drawn in a run with the estimation's
-    ``fusion_rule`` (``None``: no estimation); the MCL slot only when it is drawn."""
+    ``fusion_rule`` (``None``: no interval pipeline); the MCL slot only when it is drawn."""
     drawn = ["truth", "wall", "cone_echo", "cone_no_echo", "echo"]
+    if mcl:
+        drawn.append("mcl")
     if fusion_rule is not None:
         drawn += ["ukf_only", "fused", "outer_box", "inner_box", "hull"]
         drawn.append(fused_outline_class(fusion_rule))
     return [CLASSES[name] for name in CLASSES if name in drawn]
 
 
-def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str | None) -> None:
+def record_frame(
+    rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str | None, mcl: bool = False
+) -> None:
     """The y-up transform and the annotation context on ``world``, the legend under the map
     ``bounds (2, 2)`` (:data:`LEGEND_COLUMNS` columns of labelled points) and the notes that
-    explain it, static."""
+    explain it, static (``mcl``: the particle filter's run)."""
     # one row (one call): the batcher may split or merge separate calls by wall-clock timing
     rec.log(
         WORLD,
@@ -517,7 +568,7 @@ def record_frame(rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str |
         ),
         static=True,
     )
-    shown = legend_classes(fusion_rule)
+    shown = legend_classes(fusion_rule, mcl)
     (x0, x1), (y0, _) = np.asarray(bounds, dtype=float)
     column, row = np.divmod(np.arange(len(shown)), LEGEND_COLUMNS)[::-1]
     positions = np.stack(
@@ -836,77 +887,150 @@ def record_estimation(
     record_interval_sets(rec, estimation.epochs)
     every = slice(None, None, ESTIMATE_STRIDE)
     t_shown = log.t_s[every]
-    times = [rr.TimeColumn(TIMELINE, duration=t_shown)]
     truth = log.pose[every]
     n = len(t_shown)
     for b, branch in enumerate(BRANCHES):
         pose, cov = estimation.pose[b], estimation.pose_cov[b]
         style = BRANCH_CLASSES[branch]
         base = f"{WORLD}/estimates/{branch}"
-        record_path(rec, base, log.t_s, pose[:, :2], style)
-        shown = pose[every]
-        rec.send_columns(
-            f"{base}/position", indexes=times, columns=rr.Points2D.columns(positions=shown[:, :2])
-        )
-        rec.log(
-            f"{base}/position",
-            rr.Points2D.from_fields(
-                class_ids=style.id,
-                radii=rr.Radius.ui_points(POSITION_SIZE),
-                draw_order=DRAW_ORDER["estimates"],
-            ),
-            static=True,
-        )
-        rec.send_columns(
-            f"{base}/heading",
-            indexes=times,
-            columns=rr.Arrows2D.columns(origins=shown[:, :2], vectors=heading_vectors(shown[:, 2])),
-        )
-        rec.log(
-            f"{base}/heading",
-            rr.Arrows2D.from_fields(
-                class_ids=style.id,
-                radii=rr.Radius.ui_points(ARROW_WIDTH),
-                draw_order=DRAW_ORDER["estimates"],
-            ),
-            static=True,
-        )
+        shown = record_estimate_marks(rec, base, log.t_s, pose, style)
         outlines = covariance_ellipses(shown[:, :2], cov[every, :2, :2])
         class_ids = np.full(n, style.id, dtype=np.uint16)
         if branch == "fused" and fused_outline_class(spec.estimation.fusion) == "fused_box":
             outlines, class_ids = clamp_box_outlines(
                 log.t_s[every], outlines, class_ids, log.t_s[estimation.epoch_index], estimation
             )
-        rec.send_columns(
-            f"{base}/ellipse",
-            indexes=times,
-            columns=rr.LineStrips2D.columns(strips=outlines, class_ids=class_ids),
-        )
-        rec.log(
-            f"{base}/ellipse",
-            rr.LineStrips2D.from_fields(
-                radii=rr.Radius.ui_points(ELLIPSE_WIDTH), draw_order=DRAW_ORDER["ellipses"]
-            ),
-            static=True,
-        )
-        error_xy = np.linalg.norm(shown[:, :2] - truth[:, :2], axis=1)
-        error_theta = np.abs(wrap_angle(shown[:, 2] - truth[:, 2]))
+        record_outlines(rec, base, t_shown, outlines, class_ids)
         # the fused line (drawn first) wider than the UKF-only one, which may hide it
         width = FUSED_SERIES_WIDTH if branch == "fused" else SERIES_WIDTH
-        send_series(
+        record_errors(
             rec,
-            f"errors/position_m/{branch}",
+            branch,
             t_shown,
-            error_xy,
+            shown,
+            truth,
             SeriesStyle(style.label, style.color, width),
-        )
-        send_series(
-            rec,
-            f"errors/heading_rad/{branch}",
-            t_shown,
-            error_theta,
             SeriesStyle(heading_series_name(branch, spec.estimation.fusion), style.color, width),
         )
+
+
+def record_estimate_marks(
+    rec: rr.RecordingStream, base: str, t_s: np.ndarray, pose: np.ndarray, style: DrawClass
+) -> np.ndarray:
+    """An estimate ``pose (N, 3)`` at the samples ``t_s (N,)``: its path and trail, and its
+    position and heading at every ``ESTIMATE_STRIDE``-th sample under ``base``; returns
+    those poses ``(S, 3)``."""
+    record_path(rec, base, t_s, pose[:, :2], style)
+    shown = pose[::ESTIMATE_STRIDE]
+    times = [rr.TimeColumn(TIMELINE, duration=t_s[::ESTIMATE_STRIDE])]
+    rec.send_columns(
+        f"{base}/position", indexes=times, columns=rr.Points2D.columns(positions=shown[:, :2])
+    )
+    rec.log(
+        f"{base}/position",
+        rr.Points2D.from_fields(
+            class_ids=style.id,
+            radii=rr.Radius.ui_points(POSITION_SIZE),
+            draw_order=DRAW_ORDER["estimates"],
+        ),
+        static=True,
+    )
+    rec.send_columns(
+        f"{base}/heading",
+        indexes=times,
+        columns=rr.Arrows2D.columns(origins=shown[:, :2], vectors=heading_vectors(shown[:, 2])),
+    )
+    rec.log(
+        f"{base}/heading",
+        rr.Arrows2D.from_fields(
+            class_ids=style.id,
+            radii=rr.Radius.ui_points(ARROW_WIDTH),
+            draw_order=DRAW_ORDER["estimates"],
+        ),
+        static=True,
+    )
+    return shown
+
+
+def record_outlines(
+    rec: rr.RecordingStream,
+    base: str,
+    t_s: np.ndarray,
+    outlines: np.ndarray,
+    class_ids: np.ndarray,
+) -> None:
+    """An estimate's outlines ``(S, P, 2)`` (covariance ellipses or boxes) at ``t_s (S,)``."""
+    rec.send_columns(
+        f"{base}/ellipse",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t_s)],
+        columns=rr.LineStrips2D.columns(strips=outlines, class_ids=class_ids),
+    )
+    rec.log(
+        f"{base}/ellipse",
+        rr.LineStrips2D.from_fields(
+            radii=rr.Radius.ui_points(ELLIPSE_WIDTH), draw_order=DRAW_ORDER["ellipses"]
+        ),
+        static=True,
+    )
+
+
+def record_errors(
+    rec: rr.RecordingStream,
+    name: str,
+    t_s: np.ndarray,
+    shown: np.ndarray,
+    truth: np.ndarray,
+    position_style: SeriesStyle,
+    heading_style: SeriesStyle,
+) -> None:
+    """The position and heading errors of the poses ``shown (S, 3)`` against ``truth (S, 3)``
+    at ``t_s (S,)``, as ``errors/position_m/<name>`` and ``errors/heading_rad/<name>``."""
+    error_xy = np.linalg.norm(shown[:, :2] - truth[:, :2], axis=1)
+    error_theta = np.abs(wrap_angle(shown[:, 2] - truth[:, 2]))
+    send_series(rec, f"errors/position_m/{name}", t_s, error_xy, position_style)
+    send_series(rec, f"errors/heading_rad/{name}", t_s, error_theta, heading_style)
+
+
+#: The particles' point size, ui points (small: there are hundreds).
+PARTICLE_SIZE = 1.5
+
+
+def record_mcl(rec: rr.RecordingStream, log: SimulationLog, estimation: MclEstimation) -> None:
+    """The particle filter's estimate (as a branch's: trail, position, heading, covariance
+    ellipse, errors), its particles after each update and the set's size."""
+    style = CLASSES["mcl"]
+    base = f"{WORLD}/estimates/{MCL_BRANCH}"
+    shown = record_estimate_marks(rec, base, log.t_s, estimation.pose, style)
+    t_shown = log.t_s[::ESTIMATE_STRIDE]
+    outlines = covariance_ellipses(shown[:, :2], estimation.pose_cov[::ESTIMATE_STRIDE, :2, :2])
+    record_outlines(rec, base, t_shown, outlines, np.full(len(shown), style.id, dtype=np.uint16))
+    series = SeriesStyle(style.label, style.color)
+    truth = log.pose[::ESTIMATE_STRIDE]
+    record_errors(rec, MCL_BRANCH, t_shown, shown, truth, series, series)
+    update_t = log.t_s[estimation.update_index]
+    rec.send_columns(
+        f"{WORLD}/mcl/particles",
+        indexes=[rr.TimeColumn(TIMELINE, duration=update_t)],
+        columns=rr.Points2D.columns(positions=estimation.particles[:, :2]).partition(
+            estimation.shown_count
+        ),
+    )
+    rec.log(
+        f"{WORLD}/mcl/particles",
+        rr.Points2D.from_fields(
+            class_ids=style.id,
+            radii=rr.Radius.ui_points(PARTICLE_SIZE),
+            draw_order=DRAW_ORDER["ellipses"],
+        ),
+        static=True,
+    )
+    send_series(
+        rec,
+        "mcl/particles",
+        update_t,
+        estimation.particle_count.astype(np.float64),
+        SeriesStyle("particles (KLD-sampling)", style.color),
+    )
 
 
 def heading_series_name(branch: str, rule: str) -> str:

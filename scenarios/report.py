@@ -25,21 +25,35 @@ from scenarios import outputs
 from scenarios.campaign import RESULTS_FILE
 from scenarios.errors import ScenarioError
 
-#: The figures aggregated per setting: column and label.
+#: The figures aggregated per setting: column and label. The fused branch's figures are the
+#: estimator's own: on the rows of the particle filter (``estimation.estimator = "mcl"``)
+#: they are taken from its columns (:data:`ESTIMATOR_COLUMNS`), so the two estimators sit
+#: side by side in one column, and in the paired table.
 FIGURES = (
     ("rmse_position_m.ukf_only", "position RMSE, UKF-only (m)"),
-    ("rmse_position_m.fused", "position RMSE, fused (m)"),
+    ("rmse_position_m.fused", "position RMSE, fused or MCL (m)"),
     ("rmse_heading_rad.ukf_only", "heading RMSE, UKF-only (rad)"),
-    ("rmse_heading_rad.fused", "heading RMSE, fused (rad)"),
+    ("rmse_heading_rad.fused", "heading RMSE, fused or MCL (rad)"),
     ("nees.ukf_only.pose.mean", "pose NEES mean, UKF-only"),
-    ("nees.fused.pose.mean", "pose NEES mean, fused"),
-    ("nees.fused.pose.share_in_band", "share of fused NEES in its 95 % band"),
+    ("nees.fused.pose.mean", "pose NEES mean, fused or MCL"),
+    ("nees.fused.pose.share_in_band", "share of fused or MCL NEES in its 95 % band"),
+    ("nis.fused.share_in_band", "share of fused NIS in its 95 % band"),
     ("containment", "containment"),
     ("box.mean_area_m2", "set area (m2)"),
     ("box.mean_heading_width_rad", "set heading width (rad)"),
     ("empty_epochs", "empty epochs"),
-    ("timing.cpu_per_epoch_ms", "CPU per epoch (ms)"),
+    ("kidnaps.0.recovery_s", "first kidnap: recovery (s; recovered runs)"),
+    ("kidnaps.0.recovered", "first kidnap: share recovered"),
+    ("timing.cpu_per_epoch_ms", "CPU per epoch or MCL update (ms)"),
 )
+
+#: The particle filter's column of a fused-branch figure (used where the fused one is null).
+ESTIMATOR_COLUMNS = {
+    "rmse_position_m.fused": "rmse_position_m.mcl",
+    "rmse_heading_rad.fused": "rmse_heading_rad.mcl",
+    "nees.fused.pose.mean": "nees.mcl.pose.mean",
+    "nees.fused.pose.share_in_band": "nees.mcl.pose.share_in_band",
+}
 
 CONFIDENCE = 0.95
 
@@ -95,7 +109,22 @@ def setting_names(columns: dict[str, list[Any]]) -> list[str]:
 
 
 def column_values(columns: dict[str, list[Any]], name: str, rows: np.ndarray) -> np.ndarray:
-    """The float values of column ``name`` at ``rows`` (NaN where null or absent)."""
+    """The float values of figure ``name`` at ``rows`` (NaN where null or absent): its
+    column, else the particle filter's (:data:`ESTIMATOR_COLUMNS`); for
+    ``kidnaps.0.recovered``, 1 where the first kidnap's recovery time is set, 0 where the run
+    had a kidnap and never recovered."""
+    if name == "kidnaps.0.recovered":
+        times = _raw_values(columns, "kidnaps.0.recovery_s", rows)
+        kidnapped = ~np.isnan(_raw_values(columns, "kidnaps.0.t_s", rows))
+        return np.where(kidnapped, (~np.isnan(times)).astype(float), np.nan)
+    values = _raw_values(columns, name, rows)
+    if name in ESTIMATOR_COLUMNS:
+        other = _raw_values(columns, ESTIMATOR_COLUMNS[name], rows)
+        values = np.where(np.isnan(values), other, values)
+    return values
+
+
+def _raw_values(columns: dict[str, list[Any]], name: str, rows: np.ndarray) -> np.ndarray:
     if name not in columns:
         return np.full(len(rows), np.nan)
     values = [columns[name][i] for i in rows]

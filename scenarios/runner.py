@@ -4,7 +4,8 @@
 
 1. simulates the scenario (``robotsim``): the truth and every sensor;
 2. runs the localisation pipeline of paper 002 on its sensor data (``scenarios.pipeline``:
-   the online localiser fed the samples in order);
+   the online localiser fed the samples in order), or with ``estimator = "mcl"`` the
+   particle filter (``scenarios.mcl_pipeline``);
 3. summarises (``scenarios.metrics``, ``scenarios.pipeline.estimation_summary``).
 
 Randomness comes from one ``numpy.random.Generator`` seeded with the scenario's seed, so the
@@ -24,6 +25,7 @@ from intervals.errors import IntervalBudgetError
 from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLog, simulate
 from robotsim.world import WorldParams
 from scenarios.errors import ScenarioError
+from scenarios.mcl_pipeline import Estimator, MclEstimation, estimate_mcl, mcl_summary
 from scenarios.metrics import route_stats, summarize
 from scenarios.pipeline import (
     BRANCHES,
@@ -51,7 +53,8 @@ class RunResult:
     """What one run gives: the log, the estimates, the summary (no timing) and wall times."""
 
     log: SimulationLog
-    estimation: Estimation
+    estimation: Estimation | MclEstimation
+    """The interval pipeline's estimates, or the particle filter's (``estimator = "mcl"``)."""
     summary: dict[str, Any]
     """The deterministic figures (``scenarios.metrics``)."""
     times: StageTimes
@@ -63,7 +66,12 @@ class RunResult:
         reckoning step, the interval epoch's median and 95th percentile, and the real-time
         factor of the whole command (``wall_s``: simulation, estimation, summary, recording)."""
         times = self.times
-        epoch_ms = self.estimation.epochs.elapsed_s * 1e3
+        if isinstance(self.estimation, MclEstimation):
+            epoch_ms = np.zeros(0)
+            update_ms = self.estimation.update_s * 1e3
+        else:
+            epoch_ms = self.estimation.epochs.elapsed_s * 1e3
+            update_ms = np.zeros(0)
         timing = {
             "simulate_s": round(times.simulate_s, 4),
             "dead_reckoning_s": round(times.dead_reckoning_s, 4),
@@ -76,6 +84,8 @@ class RunResult:
             else None,
             "ia_epoch_ms_median": _rounded(np.median(epoch_ms), 3) if epoch_ms.size else None,
             "ia_epoch_ms_p95": _rounded(np.percentile(epoch_ms, 95), 3) if epoch_ms.size else None,
+            "mcl_s": round(times.mcl_s, 4),
+            "mcl_update_ms_median": _rounded(np.median(update_ms), 3) if update_ms.size else None,
             "realtime_factor": round(self.duration_s / wall_s, 1) if wall_s > 0 else None,
         }
         return {**self.summary, "timing": timing}
@@ -100,6 +110,30 @@ def run_scenario(
     start = time.perf_counter()
     simulation_progress = (lambda f: progress(SIMULATION_PROGRESS * f)) if progress else None
     try:
+        if spec.estimation.estimator == Estimator.MCL:  # beside the motion (never closed loop)
+            log = simulate_spec(spec, kidnaps=kidnaps, progress=simulation_progress)
+            simulate_s = time.perf_counter() - start
+            mcl_estimation = estimate_mcl(
+                spec,
+                log,
+                progress=(
+                    (lambda f: progress(SIMULATION_PROGRESS + (1.0 - SIMULATION_PROGRESS) * f))
+                    if progress
+                    else None
+                ),
+            )
+            summary = summarize(spec, log)
+            summary["estimator"] = str(Estimator.MCL)
+            summary.update(mcl_summary(log, mcl_estimation))
+            summary["route"] = route_stats(spec, log)
+            mcl_s = time.perf_counter() - start - simulate_s
+            return RunResult(
+                log=log,
+                estimation=mcl_estimation,
+                summary=summary,
+                times=StageTimes(simulate_s, 0.0, 0.0, 0.0, np.zeros(0), mcl_s=mcl_s),
+                duration_s=spec.run.duration_s,
+            )
         if spec.follow == Follow.TRUTH:
             log = simulate_spec(spec, kidnaps=kidnaps, progress=simulation_progress)
             simulate_s = time.perf_counter() - start
@@ -128,6 +162,7 @@ def run_scenario(
         raise ScenarioError(spec.source, "estimation.eps_m", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
     summary = summarize(spec, log)
+    summary["estimator"] = str(Estimator.INTERVALS)
     summary.update(estimation_summary(log, estimation))
     summary["route"] = route_stats(spec, log)
     return RunResult(

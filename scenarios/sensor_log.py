@@ -36,6 +36,7 @@ import pyarrow.parquet as pq
 from robotsim.simulation import SimulationLog
 from scenarios import outputs
 from scenarios.errors import ScenarioError
+from scenarios.mcl_pipeline import Estimator, estimate_mcl, mcl_summary
 from scenarios.pipeline import estimate, estimation_summary
 from scenarios.spec import ScenarioSpec, scenario_from_tables
 
@@ -183,12 +184,16 @@ def read_sensor_log(
 def replay(path: Path, estimation_file: Path | None = None) -> dict[str, Any]:
     """The localiser run on the log at ``path``: the estimation figures of the summary."""
     spec, record = read_sensor_log(path, estimation_file)
-    estimation, _ = estimate(spec, record)
+    if spec.estimation.estimator == Estimator.MCL:
+        figures = mcl_summary(record, estimate_mcl(spec, record))
+    else:
+        figures = estimation_summary(record, estimate(spec, record)[0])
     return {
         "scenario": spec.name,
         "samples": len(record.t_s),
         "scans": len(record.sonar_t_s),
-        **estimation_summary(record, estimation),
+        "estimator": str(spec.estimation.estimator),
+        **figures,
     }
 
 

@@ -48,7 +48,9 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     robot's limits); ``fusion`` (``"clamp"``, the paper's rule, or another
     ``localization.fusion.FusionRule``), ``interval_rate_hz`` (the sonar's rate: an epoch at
     every scan) and ``free_space`` (default: true exactly when the sonar never loses an
-    echo). See :class:`EstimationSpec`.
+    echo); ``estimator`` (:class:`scenarios.mcl_pipeline.Estimator`: ``"intervals"``, that
+    pipeline, or ``"mcl"``, the particle filter) and its ``[estimation.mcl]`` table (the
+    fields of ``localization.mcl.MclSettings``). See :class:`EstimationSpec`.
 
 Every number is checked against the bounds declared beside its field in the record that
 holds it (``records.bounded``: physical limits that keep every integer and float the
@@ -78,6 +80,7 @@ import shapely
 from intervals.tracker import TrackerSettings
 from localization.dead_reckoning import DeadReckoningSettings
 from localization.fusion import FusionRule
+from localization.mcl import MclSettings
 from robotsim.control import Plan, Route, ScriptedProfile
 from robotsim.errors import RobotsimError
 from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
@@ -90,6 +93,7 @@ from robotsim.world import World
 from scenarios.catalog import BUILTIN_FOLDER, DEFAULT_MAP, builtin_names
 from scenarios.errors import ScenarioError
 from scenarios.feasibility import check_feasible
+from scenarios.mcl_pipeline import Estimator
 from scenarios.tables import Table
 from validated_records import Bounds, bounded, choices, declared_bounds, validate_fields
 
@@ -118,6 +122,9 @@ STAND_STILL = ScriptedProfile(t_s=np.zeros(1), v_m_s=np.zeros(1), omega_rad_s=np
 #: settings records (same names); the table's other keys are the fields of
 #: :class:`EstimationSpec` itself.
 DEAD_RECKONING_KEYS = ("filter",)
+#: The prefix of the ``[estimation.mcl]`` keys when written in one level (campaign grids,
+#: :meth:`EstimationSpec.with_keys`): ``mcl.max_particles``.
+MCL_PREFIX = "mcl."
 TRACKER_KEYS = (
     "tracker",
     "eps_m",
@@ -212,12 +219,18 @@ class EstimationSpec:
     free_space: bool = True
     """Use no-echo readings as free space up to ``d_max``: sound only when the sonar never
     loses an echo, hence the file's default ``lost_echo_prob == 0``."""
+    estimator: Estimator = Estimator.INTERVALS
+    """What localises the robot: the interval pipeline above, or the particle filter."""
+    mcl: MclSettings = dataclasses.field(default_factory=MclSettings)
+    """The particle filter's settings (``localization.mcl``; the ``[estimation.mcl]`` table,
+    keys ``mcl.<field>`` in :meth:`with_keys`), used when ``estimator = "mcl"``."""
 
     def __post_init__(self) -> None:
         validate_fields(self, _CodeError)
         for name, kind in (
             ("intervals", TrackerSettings),
             ("dead_reckoning", DeadReckoningSettings),
+            ("mcl", MclSettings),
         ):
             if not isinstance(getattr(self, name), kind):
                 raise ScenarioError(None, None, f"EstimationSpec.{name} must be a {kind.__name__}")
@@ -229,11 +242,12 @@ class EstimationSpec:
     @classmethod
     def _own_keys(cls) -> tuple[str, ...]:
         """The keys of ``[estimation]`` that are fields of this record (not of the parts)."""
-        parts = ("intervals", "dead_reckoning")
+        parts = ("intervals", "dead_reckoning", "mcl")
         return tuple(f.name for f in dataclasses.fields(cls) if f.name not in parts)
 
     def as_keys(self) -> dict[str, Any]:
-        """The settings as the keys of an ``[estimation]`` table (choices as their strings)."""
+        """The settings as the keys of an ``[estimation]`` table (choices as their strings;
+        the ``[estimation.mcl]`` sub-table's apart, :data:`MCL_PREFIX` keys of :meth:`with_keys`)."""
         records = (
             (self.dead_reckoning, DEAD_RECKONING_KEYS),
             (self.intervals, TRACKER_KEYS),
@@ -244,9 +258,17 @@ class EstimationSpec:
 
     def with_keys(self, **changes: Any) -> EstimationSpec:
         """These settings with keys of the ``[estimation]`` table replaced (``tracker="imagesp"``,
-        ``q_max=2``, ``filter="ekf"``...), each in the record that holds it."""
+        ``q_max=2``, ``filter="ekf"``, ``**{"mcl.max_particles": 5000}``...), each in the
+        record that holds it."""
         own = self._own_keys()
-        unknown = set(changes) - set(own) - set(TRACKER_KEYS) - set(DEAD_RECKONING_KEYS)
+        mcl_fields = {f.name for f in dataclasses.fields(MclSettings)}
+        mcl = {
+            key.removeprefix(MCL_PREFIX): value
+            for key, value in changes.items()
+            if key.startswith(MCL_PREFIX) and key.removeprefix(MCL_PREFIX) in mcl_fields
+        }
+        known = {*own, *TRACKER_KEYS, *DEAD_RECKONING_KEYS, *(MCL_PREFIX + key for key in mcl)}
+        unknown = set(changes) - known
         if unknown:
             raise ScenarioError(
                 None, None, f"not keys of [estimation]: {', '.join(sorted(unknown))}"
@@ -259,6 +281,7 @@ class EstimationSpec:
             self,
             intervals=dataclasses.replace(self.intervals, **part(TRACKER_KEYS)),
             dead_reckoning=dataclasses.replace(self.dead_reckoning, **part(DEAD_RECKONING_KEYS)),
+            mcl=dataclasses.replace(self.mcl, **mcl),
             **part(own),
         )
 
@@ -290,6 +313,12 @@ class ScenarioSpec:
         if self.follow != Follow.TRUTH and not isinstance(self.plan, Route):
             raise ScenarioError(
                 self.source, "route.follow", "a closed loop needs waypoints_m (a route)"
+            )
+        if self.follow != Follow.TRUTH and self.estimation.estimator == Estimator.MCL:
+            raise ScenarioError(
+                self.source,
+                "route.follow",
+                'a closed loop steers on the interval pipeline: not with estimator = "mcl"',
             )
         problem = estimation_problem(self.estimation, self.robot, self.sensors.sonar)
         if problem is not None:
@@ -641,10 +670,11 @@ def _read_estimation(table: Table, robot: RobotParams, sonar: SonarBeltParams) -
         interval_rate_hz=sonar.rate_hz,
         free_space=sonar.lost_echo_prob == 0.0,
     )
+    mcl = _read_params(table.take_table("mcl"), own_defaults.mcl)
     estimation = _read_params(
         table,
-        own_defaults,
-        skip=("intervals", "dead_reckoning"),
+        dataclasses.replace(own_defaults, mcl=mcl),
+        skip=("intervals", "dead_reckoning", "mcl"),
         parts={
             "intervals": (limits, TRACKER_KEYS),
             "dead_reckoning": (own_defaults.dead_reckoning, DEAD_RECKONING_KEYS),

@@ -124,3 +124,30 @@ def circuit_poses(epochs: int) -> np.ndarray:
     t = np.arange(epochs, dtype=float)
     heading = np.mod(omega * t + np.pi / 2 + np.pi, 2 * np.pi) - np.pi
     return np.stack([4.5 + 2.0 * np.cos(omega * t), 3.8 + 2.0 * np.sin(omega * t), heading], 1)
+
+
+def recording_columns(path) -> dict:
+    """A ``.rrd`` recording read back: per ``(entity path, is static)``, its columns (without
+    row ids) merged over its chunks, each the list of its rows (times in nanoseconds)."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    data: dict = {}
+    for chunk in reader.stream(store=reader.recordings()[0]):
+        batch = chunk.to_record_batch()
+        merged = data.setdefault((chunk.entity_path, chunk.is_static), {})
+        for name in batch.schema.names:
+            if name == "rerun.controls.RowId":
+                continue
+            column = batch.column(name)
+            if pa.types.is_duration(column.type) or pa.types.is_timestamp(column.type):
+                column = column.cast(pa.int64())  # nanoseconds
+            merged.setdefault(name, []).extend(column.to_pylist())
+    return data
+
+
+def annotation_labels(data: dict) -> set[str]:
+    """The class labels of the annotation context on ``/world`` of :func:`recording_columns`."""
+    ((context,),) = data[("/world", True)]["AnnotationContext:context"]  # one row, one instance
+    return {entry["class_description"]["info"]["label"] for entry in context}

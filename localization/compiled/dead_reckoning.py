@@ -17,7 +17,9 @@ it is tested against, ``tests/localization/test_dead_reckoning.py``):
   the iterated ones converge at their first iteration; module docstring of
   :mod:`localization.dead_reckoning`): ``S = H P- H^T + R``, ``K^T = S^-1 H P-`` (Cholesky
   solve), ``x+ = x- + K (z - H x-)``, ``P+ = P- - P- H^T K^T`` (``ExtendedKalmanFilter``
-  takes the Joseph form, equal in exact arithmetic).
+  takes the Joseph form, equal in exact arithmetic); and the normalised innovation squared
+  ``NIS = nu^T S^-1 nu = |C^-1 nu|^2`` of the innovation ``nu = z - H x-`` (``C C^T = S``,
+  one forward substitution; Bar-Shalom, Li and Kirubarajan 2001, section 5.4.2).
 
 Covariances are built from their lower triangle and mirrored, so they stay exactly
 symmetric. The heading is kept unwrapped in the carried mean (the model is periodic in it)
@@ -185,9 +187,10 @@ def _linearised_predict(mean, cov, accel_m_s2, dt_s, q_cov, jac, product, image)
 @numba.njit(cache=True)
 def _linear_update(
     mean, cov, z, r_cov, wheel_base_m, speed_correction, h, cross, s_cov, s_chol, gain_t, innovation
-) -> bool:
-    """The closed-form update of ``mean (8,)``, ``cov (8, 8)`` by ``z (3,)``; returns ``False``
-    when ``S`` is not positive definite (then nothing is changed).
+) -> float:
+    """The closed-form update of ``mean (8,)``, ``cov (8, 8)`` by ``z (3,)``; returns the NIS
+    of the innovation, or ``-1.0`` when ``S`` is not positive definite (then nothing is
+    changed).
 
     ``H(k)`` as :func:`localization.dead_reckoning.measurement_matrix` builds it, with the
     regressor ``(omega, v)`` = the predicted ``omega`` and the predicted ``v`` less
@@ -203,12 +206,17 @@ def _linear_update(
     h[2, OMEGA] = 1.0
     h[2, B_GYRO] = 1.0
     if not kalman_gain_t(cov, h, r_cov, cross, s_cov, s_chol, gain_t):  # K^T = S^-1 (P H^T)^T
-        return False
+        return -1.0
     for r in range(m):  # z - H x-
         total = 0.0
         for j in range(n):
             total += h[r, j] * mean[j]
         innovation[r] = z[r] - total
+    # NIS = |w|^2 with C w = nu, C = s_chol the lower Cholesky factor of S (m = 3 unrolled)
+    w0 = innovation[0] / s_chol[0, 0]
+    w1 = (innovation[1] - s_chol[1, 0] * w0) / s_chol[1, 1]
+    w2 = (innovation[2] - s_chol[2, 0] * w0 - s_chol[2, 1] * w1) / s_chol[2, 2]
+    nis = w0 * w0 + w1 * w1 + w2 * w2
     for i in range(n):  # x+ = x- + K (z - H x-)
         total = 0.0
         for r in range(m):
@@ -222,7 +230,7 @@ def _linear_update(
             value = cov[i, j] - total
             cov[i, j] = value
             cov[j, i] = value
-    return True
+    return nis
 
 
 @numba.njit(cache=True)
@@ -245,6 +253,7 @@ def run_steps(
     wrap_offsets,
     mean_hist,
     cov_hist,
+    nis_hist,
 ) -> int:
     """Samples ``start..stop-1`` of every run; returns ``-1``, or the sample where a covariance
     to factorise (``P`` or ``S``) is not positive definite or the updated mean is not finite
@@ -262,6 +271,7 @@ def run_steps(
             wrap_offsets: the sigma points (unused when not ``unscented``).
         mean_hist: ``(N, B, 8)``, rows ``start..stop-1`` written (heading wrapped).
         cov_hist: ``(N, B, c, c)``, the leading ``c x c`` block of each covariance.
+        nis_hist: ``(N, B)``, the NIS of each update (3 degrees of freedom), rows written.
     """
     n = N_STATES
     batch = mean.shape[0]
@@ -310,24 +320,23 @@ def run_steps(
             else:
                 _linearised_predict(x, p, accel, dt_s, q_cov, chol, product, image)
             predicted_v = x[V]
-            if not (
-                _linear_update(
-                    x,
-                    p,
-                    z[k, 0 if shared_z else b],
-                    r_cov,
-                    wheel_base_m,
-                    speed_correction[b],
-                    h,
-                    cross,
-                    s_cov,
-                    s_chol,
-                    gain_t,
-                    innovation,
-                )
-                and all_finite(x)
-            ):
+            nis = _linear_update(
+                x,
+                p,
+                z[k, 0 if shared_z else b],
+                r_cov,
+                wheel_base_m,
+                speed_correction[b],
+                h,
+                cross,
+                s_cov,
+                s_chol,
+                gain_t,
+                innovation,
+            )
+            if nis < 0.0 or not all_finite(x):
                 return k
+            nis_hist[k, b] = nis
             speed_correction[b] = x[V] - predicted_v
             for i in range(n):
                 mean_hist[k, b, i] = x[i]

@@ -218,6 +218,9 @@ def assert_same_history(compiled, generic, mean_atol, cov_rtol):
     assert (
         np.abs(compiled.cov - generic.cov) / (std[..., :, None] * std[..., None, :])
     ).max() < cov_rtol
+    # the NIS of every update: the compiled Cholesky substitution against numpy's solve
+    assert np.isnan(compiled.nis[0]).all() and np.isnan(generic.nis[0]).all()
+    np.testing.assert_allclose(compiled.nis[1:], generic.nis[1:], rtol=1e-6, atol=1e-9)
 
 
 @pytest.mark.parametrize(

@@ -21,6 +21,7 @@ from scenarios import campaign as campaign_module
 from scenarios.cli import EXIT_USER_ERROR, main
 from scenarios.runner import run_scenario
 from scenarios.spec import load_scenario
+from tests.helpers import recording_columns
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -149,22 +150,23 @@ def test_kill_minus_nine_then_resume_loses_no_finished_run_and_repeats_none(tmp_
     assert all(r["status"] == "ok" for r in table)
 
 
-@pytest.mark.slow
-def test_a_failing_run_is_recorded_with_its_error_and_the_others_finish(tmp_path):
-    """A real failure at run time (a setting forced past its validation, as a defect would
-    let through: the tracker meets an infinite heading scale) on the real pool."""
-    campaign = campaign_module.load_campaign(write(tmp_path, CAMPAIGN))
-    forced = dataclasses.replace(campaign.runs[1].spec.estimation.intervals)
+def with_failing_run(campaign, index: int):
+    """``campaign`` with run ``index`` failing at run time (a setting forced past its
+    validation, as a defect would let through: the tracker meets an infinite heading scale)."""
+    forced = dataclasses.replace(campaign.runs[index].spec.estimation.intervals)
     object.__setattr__(forced, "heading_scale_m_per_rad", np.inf)
-    spec = campaign.runs[1].spec
+    spec = campaign.runs[index].spec
     broken = dataclasses.replace(
         spec, estimation=dataclasses.replace(spec.estimation, intervals=forced)
     )
     runs = list(campaign.runs)
-    runs[1] = dataclasses.replace(runs[1], spec=broken)
-    campaign = dataclasses.replace(campaign, runs=tuple(runs))
+    runs[index] = dataclasses.replace(runs[index], spec=broken)
+    return dataclasses.replace(campaign, runs=tuple(runs))
 
-    folder = campaign_module.ResultsFolder(tmp_path / "out")
+
+def run_on_pool(campaign, out: Path) -> list[dict]:
+    """The campaign's runs on the real local pool (two workers), committed to ``out``."""
+    folder = campaign_module.ResultsFolder(out)
     folder.prepare(campaign, resume=False)
 
     def sink(batch_rows):
@@ -172,7 +174,14 @@ def test_a_failing_run_is_recorded_with_its_error_and_the_others_finish(tmp_path
             folder.commit(row)
 
     campaign_module.execute_local(campaign_module.batched(campaign.runs, 1), 2, sink)
-    table = rows(folder.merge(campaign))
+    return rows(folder.merge(campaign))
+
+
+@pytest.mark.slow
+def test_a_failing_run_is_recorded_with_its_error_and_the_others_finish(tmp_path):
+    """A real failure at run time on the real pool."""
+    campaign = with_failing_run(campaign_module.load_campaign(write(tmp_path, CAMPAIGN)), 1)
+    table = run_on_pool(campaign, tmp_path / "out")
     assert [r["status"] for r in table] == ["ok", "failed", "ok", "ok"]
     # a defect of ours, not the user's mistake: the IntervalError itself is recorded
     assert "IntervalError" in table[1]["error"] and "scale must be" in table[1]["error"]
@@ -197,6 +206,9 @@ def test_a_failing_run_is_recorded_with_its_error_and_the_others_finish(tmp_path
         (('["hall"]', '["hall", "hall"]'), "scenarios", "twice"),
         (('"clamp", "truncated"', '"clamp", "clamp"'), "grid.estimation.fusion", "twice"),
         (("duration_s = 5.0", "duration_s = -1.0"), "duration_s", "> 0"),
+        (("duration_s = 5.0", 'duration_s = 5.0\nrecord = "some"'), "record", "'failures'"),
+        (("duration_s = 5.0", "duration_s = 5.0\nrecord = 5"), "record", "from 1 to 4, got 5"),
+        (("duration_s = 5.0", "duration_s = 5.0\nrecord = true"), "record", "got True"),
     ],
 )
 def test_a_bad_campaign_file_is_refused_with_file_key_and_reason(
@@ -279,3 +291,44 @@ def test_a_worker_killed_by_the_system_leaves_its_runs_missing_not_failed(tmp_pa
     assert resumed.returncode == 0, resumed.stderr
     table = rows(out / campaign_module.RESULTS_FILE)
     assert len(table) == 6 and all(r["status"] == "ok" for r in table)
+
+
+@pytest.mark.slow
+def test_record_failures_writes_recordings_for_the_failed_runs_only(tmp_path):
+    text = CAMPAIGN.replace("duration_s = 5.0", 'duration_s = 5.0\nrecord = "failures"')
+    campaign = with_failing_run(campaign_module.load_campaign(write(tmp_path, text)), 1)
+    out = tmp_path / "out"
+    table = run_on_pool(campaign, out)
+    assert [r["status"] for r in table] == ["ok", "failed", "ok", "ok"]
+    assert all(r["guarantee"] is None for r in table)  # no fault-free run broke it
+    name = f"recordings/{campaign.runs[1].key}.rrd"
+    assert [r["recording"] for r in table] == [None, name, None, None]
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == [f"{campaign.runs[1].key}.rrd"]
+    # the failed run's world, truth and sensors, read back; no estimates (it has none)
+    entities = {entity for entity, _ in recording_columns(out / name)}
+    assert "/world/robot/footprint" in entities and "/world/sonar/echoes" in entities
+    assert not any(entity.startswith("/world/estimates") for entity in entities)
+
+
+@pytest.mark.slow
+def test_record_a_count_records_that_many_runs_drawn_from_the_campaign_seed(tmp_path):
+    text = CAMPAIGN.replace("duration_s = 5.0", "duration_s = 2.0\nrecord = 2")
+    campaign = campaign_module.load_campaign(write(tmp_path, text))
+    chosen = [run.index for run in campaign.runs if run.record == campaign_module.Record.ALL]
+    assert len(chosen) == 2
+    assert chosen == [  # the same draw on every load (so on --resume)
+        run.index
+        for run in campaign_module.load_campaign(write(tmp_path, text, "again.toml")).runs
+        if run.record == campaign_module.Record.ALL
+    ]
+    folder = campaign_module.ResultsFolder(tmp_path / "out")
+    folder.prepare(campaign, resume=False)
+    for run in campaign.runs:
+        folder.commit(campaign_module.run_one(run))
+    table = rows(folder.merge(campaign))
+    assert [r["recording"] is not None for r in table] == [i in chosen for i in range(len(table))]
+    for row in table:
+        if row["recording"]:
+            from scenarios.recording import verify_recording
+
+            verify_recording(tmp_path / "out" / row["recording"], f"hall-seed{row['seed']}")

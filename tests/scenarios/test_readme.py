@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from intervals.tracker import TrackerSettings
+from localization.mcl import MclSettings
 from robotsim.control import Route
 from robotsim.robot import RobotParams
 from robotsim.sensors.encoders import EncoderParams
@@ -74,6 +75,7 @@ DOCUMENTED: dict[str, Any] = {
     "[estimation]": EstimationSpec(
         intervals=TrackerSettings(ROBOT.v_max_m_s, ROBOT.omega_max_rad_s)
     ),
+    "[estimation.mcl]": MclSettings(),
 }
 
 

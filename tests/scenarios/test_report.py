@@ -81,3 +81,39 @@ def test_paired_differences_match_seeds_and_skip_failed_pairs(tmp_path):
     assert record["group"] == ("hall", "truncated") and record["baseline"] == ("hall", "clamp")
     mean, half, n = record["figures"]["rmse_position_m.fused"]
     assert n == 2 and np.isclose(mean, -1.0) and np.isclose(half, 0.0, atol=1e-12)
+
+
+def test_mcl_rows_give_the_estimate_figures_beside_the_fused_ones(tmp_path):
+    """Rows of the particle filter have ``rmse_position_m.mcl`` and no fused column: the
+    report's fused-or-MCL figure takes it, and the pairs compare it seed by seed."""
+    rows = []
+    for estimator in ("intervals", "mcl"):
+        for seed in range(3):
+            row = {
+                "scenario": "hall",
+                "seed": seed,
+                "setting.estimation.estimator": estimator,
+                "status": "ok",
+                "kidnaps.0.t_s": 30.0,
+            }
+            if estimator == "mcl":
+                row["rmse_position_m.mcl"] = 0.05 * (seed + 1)
+                row["kidnaps.0.recovery_s"] = 4.0 if seed else None  # seed 0 never recovers
+            else:
+                row["rmse_position_m.fused"] = 0.02 * (seed + 1)
+                row["kidnaps.0.recovery_s"] = 1.0
+            rows.append(row)
+    # one table per row, merged as the campaign merges its parts (the columns differ)
+    merged = pa.concat_tables(
+        [pa.Table.from_pylist([row]) for row in rows], promote_options="permissive"
+    )
+    pq.write_table(merged, tmp_path / "results.parquet")
+    columns = load_results(tmp_path)
+    records = {r["group"]: r for r in aggregate(columns)}
+    mcl = records[("hall", "mcl")]["figures"]
+    assert np.isclose(mcl["rmse_position_m.fused"][0], 0.1) and mcl["rmse_position_m.fused"][2] == 3
+    assert np.isclose(mcl["kidnaps.0.recovered"][0], 2 / 3)
+    assert np.isclose(mcl["kidnaps.0.recovery_s"][0], 4.0) and mcl["kidnaps.0.recovery_s"][2] == 2
+    (pair,) = paired_differences(columns)
+    mean, _, n = pair["figures"]["rmse_position_m.fused"]
+    assert n == 3 and np.isclose(mean, 0.03 * 2)  # mean of 0.03 (s + 1) over s = 0, 1, 2

@@ -1,0 +1,421 @@
+"""Issue 15's first campaign: every estimator on the built-in plans, with and without faults.
+
+    robotsim reproduce estimators [--out DIR] [--seeds N] [--duration S]
+                                  [--scenarios NAME ...] [--workers N] [--quick]
+
+Five estimators on the same simulated worlds (common random numbers, seed by seed):
+
+- ``ukf_only``: the dead reckoning alone (the UKF-only branch of the interval runs);
+- ``clamp``, ``clamp_heading``, ``truncated``: the interval pipeline with that fusion rule
+  (``[estimation] fusion``; the paper's rule is ``clamp``);
+- ``mcl``: Monte Carlo localisation from a uniform prior (``estimator = "mcl"``, with the
+  ``[estimation.mcl]`` settings of :data:`MCL_SETTINGS`).
+
+Each built-in plan of :data:`SCENARIOS` runs twice: as shipped (no sensor faults) and as
+``<name>_faults``: sonar outliers (``outlier_prob``) and lost echoes (``lost_echo_prob``),
+:data:`FAULTS`, and a kidnapping halfway through the run to the free pose farthest from the
+route (no odometry of the jump). Unmapped obstacles are not among the faults: the
+simulator has no obstacles outside the map yet.
+
+It is an ordinary campaign (``scenarios.campaign``): the scenario files and the campaign
+file are written to ``DIR/inputs/`` (``robotsim campaign DIR/inputs/estimators.toml`` runs
+the same campaign by hand, with ``--resume``), the grid is ``estimator`` x ``fusion`` less
+the MCL runs with a fusion rule other than the first (MCL has none: they would repeat it).
+Writes ``DIR/campaign/results.parquet`` (one row per run, as any campaign), ``DIR/report/``
+(``robotsim report`` of it) and ``DIR/estimators.md``, ``DIR/estimators.png``: per scenario
+and estimator the mean and 95 % interval of the position and heading RMSE, the pose NEES
+(mean, share in its band), the kidnap recovery and the CPU time per epoch (per update for
+MCL).
+
+``--quick``: ``hall`` only, 2 seeds, 20 s (a smoke test, under a minute on two cores). The
+full campaign (5 plans x 2 fault settings x 20 seeds x 4 runs of 300 s) is for users; its
+running time is in ``docs/reproductions.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from localization.fusion import FusionRule
+from robotsim.control import Route
+from robotsim.maps import point_segment_distance
+from scenarios import report as report_module
+from scenarios.campaign import Campaign, ResultsFolder, load_campaign, run_campaign
+from scenarios.errors import ScenarioError
+from scenarios.mcl_pipeline import Estimator
+from scenarios.mcl_ranges import free_space_sampler
+from scenarios.outputs import atomic_directory, write_text
+from scenarios.spec import BUILTIN_FOLDER, load_scenario
+
+HELP = (
+    "issue 15: UKF-only, clamp, clamp_heading, truncated and MCL on the built-in plans, with "
+    "and without faults (a campaign; table, report and figures)"
+)
+
+#: The estimators compared, in the table's order.
+ESTIMATORS = ("ukf_only", "clamp", "clamp_heading", "truncated", "mcl")
+FUSIONS = (FusionRule.CLAMP, FusionRule.CLAMP_HEADING, FusionRule.TRUNCATED)
+
+#: The built-in plans the interval stage runs within a workstation's memory and time
+#: (``big_hall``, ``corridor`` and ``office_floor`` do not yet: issue 13).
+SCENARIOS = ("hall", "office", "symmetric", "apartment", "cluttered_room")
+
+#: The sonar faults of the ``_faults`` variants (``[sensors.sonar]``).
+FAULTS = {"outlier_prob": 0.02, "lost_echo_prob": 0.02}
+#: The kidnapping of the ``_faults`` variants, as a share of the run's duration.
+KIDNAP_AT = 0.5
+#: Clearance of the kidnap pose from the walls beyond the robot's radius, m.
+KIDNAP_CLEARANCE_M = 0.15
+
+#: The particle filter's settings (``[estimation.mcl]``): a prior dense enough for global
+#: localisation on these floors, and random particles to find a kidnapped robot.
+MCL_SETTINGS = {"max_particles": 10000, "recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1}
+
+CAMPAIGN_SEED = 2026
+DEFAULT_SEEDS = 20
+DEFAULT_DURATION_S = 300.0
+#: ``--quick``: the plans, seeds and duration of the smoke test.
+QUICK_SCENARIOS = ("hall",)
+QUICK_SEEDS = 2
+QUICK_DURATION_S = 20.0
+
+CAMPAIGN_NAME = "estimators"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``robotsim reproduce estimators``."""
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/reproduce/estimators"),
+        help="output folder (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--seeds", type=int, metavar="N", help=f"replicates (default: {DEFAULT_SEEDS})"
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help=f"simulated time of every run, s (default: {DEFAULT_DURATION_S:g})",
+    )
+    parser.add_argument(
+        "--scenarios",
+        nargs="+",
+        metavar="NAME",
+        choices=SCENARIOS,
+        help=f"built-in plans (default: {' '.join(SCENARIOS)})",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="worker processes (default: every core)"
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"a smoke test: {', '.join(QUICK_SCENARIOS)}, {QUICK_SEEDS} seeds, "
+        f"{QUICK_DURATION_S:g} s (options given still apply)",
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# The campaign's inputs
+# ---------------------------------------------------------------------------------------
+def builtin_tables(name: str) -> dict[str, Any]:
+    """The tables of built-in scenario ``name``, its map file (if any) made absolute."""
+    data = tomllib.loads((BUILTIN_FOLDER / f"{name}.toml").read_text(encoding="utf-8"))
+    map_file = data.get("map", {}).get("file")
+    if map_file is not None:
+        data["map"]["file"] = str(Path(str(BUILTIN_FOLDER)) / map_file)
+    return data
+
+
+def kidnap_pose(name: str) -> tuple[float, float, float]:
+    """The free pose of built-in ``name`` farthest from its route (start and waypoints):
+    the best of 500 positions drawn uniformly over the free space (seed 0), heading 180 deg."""
+    spec = load_scenario(name)
+    sample = free_space_sampler(spec.map, spec.robot.radius_m + KIDNAP_CLEARANCE_M)
+    candidates = sample(np.random.default_rng(0), 500)
+    path = np.vstack([np.array(spec.start_pose[:2])[None], _waypoints(spec)])
+    legs = [(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)]
+    distance = np.min([point_segment_distance(candidates, a, b) for a, b in legs], axis=0)
+    x, y = candidates[int(np.argmax(distance))]
+    return float(x), float(y), 180.0
+
+
+def _waypoints(spec) -> np.ndarray:
+    return spec.plan.waypoints_m if isinstance(spec.plan, Route) else np.zeros((0, 2))
+
+
+def scenario_variants(name: str, duration_s: float) -> dict[str, dict[str, Any]]:
+    """The tables of ``name`` and ``name_faults`` (module docstring), with the MCL settings
+    and the duration."""
+    clean = builtin_tables(name)
+    clean.setdefault("run", {})["duration_s"] = duration_s
+    clean.setdefault("estimation", {})["mcl"] = dict(MCL_SETTINGS)
+    faulty = json.loads(json.dumps(clean))
+    faulty.setdefault("sensors", {}).setdefault("sonar", {}).update(FAULTS)
+    x, y, heading = kidnap_pose(name)
+    faulty["events"] = [
+        {"kind": "kidnap", "t_s": KIDNAP_AT * duration_s, "xy_m": [x, y], "heading_deg": heading}
+    ]
+    faulty["description"] = (
+        f"{name} with sonar outliers and lost echoes ({FAULTS['outlier_prob']:g}, "
+        f"{FAULTS['lost_echo_prob']:g}) and a kidnapping at {KIDNAP_AT * duration_s:g} s"
+    )
+    return {name: clean, f"{name}_faults": faulty}
+
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def toml_text(data: dict[str, Any]) -> str:
+    """``data`` (tables of strings, booleans, numbers and arrays of them, sub-tables and
+    arrays of tables: what a scenario file holds) as TOML text that ``tomllib`` reads back
+    to ``data``."""
+    lines: list[str] = []
+
+    def key(name: str) -> str:
+        return name if _BARE_KEY.match(name) else json.dumps(name)
+
+    def value(item: Any) -> str:
+        if isinstance(item, bool):
+            return "true" if item else "false"
+        if isinstance(item, int | float):
+            if not math.isfinite(item):
+                raise ValueError(f"toml_text: {item!r} is not a TOML number here")
+            return repr(item)
+        if isinstance(item, str):
+            return json.dumps(item)
+        if isinstance(item, list):
+            return "[" + ", ".join(value(v) for v in item) + "]"
+        raise ValueError(f"toml_text: cannot write {type(item).__name__}")
+
+    def table(body: dict[str, Any], prefix: str) -> None:
+        for name, item in body.items():
+            if not isinstance(item, dict) and not _is_table_array(item):
+                lines.append(f"{key(name)} = {value(item)}")
+        for name, item in body.items():
+            path = f"{prefix}.{key(name)}" if prefix else key(name)
+            if isinstance(item, dict):
+                lines.extend(["", f"[{path}]"])
+                table(item, path)
+            elif _is_table_array(item):
+                for entry in item:
+                    lines.extend(["", f"[[{path}]]"])
+                    table(entry, path)
+
+    table(data, "")
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _is_table_array(item: Any) -> bool:
+    return isinstance(item, list) and bool(item) and all(isinstance(v, dict) for v in item)
+
+
+def campaign_text(files: list[str], seeds: int, duration_s: float) -> str:
+    """The campaign file: the scenario files, the seeds, estimator x fusion."""
+    return toml_text(
+        {
+            "scenarios": files,
+            "seed": CAMPAIGN_SEED,
+            "seeds": {"first": 0, "count": seeds},
+            "duration_s": duration_s,
+            "grid": {
+                "estimation.estimator": [str(e) for e in Estimator],
+                "estimation.fusion": [str(f) for f in FUSIONS],
+            },
+        }
+    )
+
+
+def build_campaign(inputs: Path, names: tuple[str, ...], seeds: int, duration_s: float) -> Campaign:
+    """Write the scenario files and the campaign file into ``inputs``; the campaign, less
+    the MCL runs of the fusion rules after the first (module docstring)."""
+    inputs.mkdir(parents=True, exist_ok=True)
+    files = []
+    for name in names:
+        for variant, tables in scenario_variants(name, duration_s).items():
+            write_text(inputs / f"{variant}.toml", toml_text(tables))
+            files.append(f"{variant}.toml")
+    path = inputs / f"{CAMPAIGN_NAME}.toml"
+    write_text(path, campaign_text(files, seeds, duration_s))
+    campaign = load_campaign(path)
+    kept = [
+        run
+        for run in campaign.runs
+        if run.settings["estimation.estimator"] != Estimator.MCL
+        or run.settings["estimation.fusion"] == FUSIONS[0]
+    ]
+    runs = tuple(dataclasses.replace(run, index=i) for i, run in enumerate(kept))
+    return dataclasses.replace(campaign, runs=runs)
+
+
+# ---------------------------------------------------------------------------------------
+# The estimators table
+# ---------------------------------------------------------------------------------------
+#: The figures of the estimators table: label, and the column per kind of estimator
+#: (``ukf_only``, an interval fusion rule, ``mcl``; None: no such figure).
+TABLE_FIGURES = (
+    (
+        "position RMSE (m)",
+        ("rmse_position_m.ukf_only", "rmse_position_m.fused", "rmse_position_m.mcl"),
+    ),
+    (
+        "heading RMSE (rad)",
+        ("rmse_heading_rad.ukf_only", "rmse_heading_rad.fused", "rmse_heading_rad.mcl"),
+    ),
+    ("pose NEES mean", ("nees.ukf_only.pose.mean", "nees.fused.pose.mean", "nees.mcl.pose.mean")),
+    (
+        "pose NEES in band",
+        (
+            "nees.ukf_only.pose.share_in_band",
+            "nees.fused.pose.share_in_band",
+            "nees.mcl.pose.share_in_band",
+        ),
+    ),
+    ("kidnap recovered", (None, "kidnaps.0.recovered", "kidnaps.0.recovered")),
+    ("kidnap recovery (s)", (None, "kidnaps.0.recovery_s", "kidnaps.0.recovery_s")),
+    ("CPU per epoch (ms)", (None, "timing.cpu_per_epoch_ms", "timing.cpu_per_epoch_ms")),
+)
+
+
+def estimator_rows(columns: dict[str, list[Any]], scenario: str, estimator: str) -> np.ndarray:
+    """The successful rows of ``estimator`` on ``scenario`` (``ukf_only``: the rows of the
+    first fusion rule, whose UKF-only branch it is)."""
+    want_mcl = estimator == "mcl"
+    fusion = FUSIONS[0] if estimator in ("ukf_only", "mcl") else estimator
+    picked = [
+        i
+        for i in range(len(columns["scenario"]))
+        if columns["scenario"][i] == scenario
+        and columns["status"][i] == "ok"
+        and (columns["setting.estimation.estimator"][i] == Estimator.MCL) == want_mcl
+        and columns["setting.estimation.fusion"][i] == fusion
+    ]
+    return np.array(picked, dtype=np.int64)
+
+
+def estimator_table(columns: dict[str, list[Any]]) -> list[dict[str, Any]]:
+    """Per scenario and estimator: the run count and, per figure of :data:`TABLE_FIGURES`,
+    ``(mean, half width, n)`` (``report.confidence_interval``) and the values."""
+    records = []
+    for scenario in dict.fromkeys(columns["scenario"]):
+        for estimator in ESTIMATORS:
+            rows = estimator_rows(columns, scenario, estimator)
+            kind = 0 if estimator == "ukf_only" else 2 if estimator == "mcl" else 1
+            figures, values = {}, {}
+            for label, names in TABLE_FIGURES:
+                name = names[kind]
+                data = (
+                    report_module.column_values(columns, name, rows)
+                    if name is not None
+                    else np.full(len(rows), np.nan)
+                )
+                figures[label] = report_module.confidence_interval(data)
+                values[label] = data[np.isfinite(data)]
+            records.append(
+                {
+                    "scenario": scenario,
+                    "estimator": estimator,
+                    "runs": len(rows),
+                    "figures": figures,
+                    "values": values,
+                }
+            )
+    return records
+
+
+def table_markdown(records: list[dict[str, Any]]) -> str:
+    """The estimators table: one row per scenario and estimator, ``mean ± half width``."""
+    header = ["scenario", "estimator", "runs", *(label for label, _ in TABLE_FIGURES)]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for record in records:
+        cells = [record["scenario"], record["estimator"], str(record["runs"])]
+        for label, _ in TABLE_FIGURES:
+            mean, half, n = record["figures"][label]
+            cells.append(
+                "" if n == 0 else f"{mean:.4g}" if math.isnan(half) else f"{mean:.4g} ± {half:.2g}"
+            )
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table_figure(records: list[dict[str, Any]], path: Path) -> None:
+    """Box plots of the position and heading RMSE per estimator, one column per scenario."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenarios = list(dict.fromkeys(r["scenario"] for r in records))
+    fig, axes = plt.subplots(
+        2, len(scenarios), figsize=(4 * len(scenarios), 7), squeeze=False, constrained_layout=True
+    )
+    for column, scenario in enumerate(scenarios):
+        mine = [r for r in records if r["scenario"] == scenario]
+        for row, label in enumerate(("position RMSE (m)", "heading RMSE (rad)")):
+            axis = axes[row, column]
+            data = [r["values"][label] for r in mine]
+            axis.boxplot(
+                [d if len(d) else [np.nan] for d in data],
+                tick_labels=[r["estimator"] for r in mine],
+            )
+            axis.set_yscale("log")
+            axis.set_title(f"{scenario}: {label}", fontsize=9)
+            axis.tick_params(axis="x", labelsize=7, rotation=30)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------
+# The command
+# ---------------------------------------------------------------------------------------
+def main(args: argparse.Namespace) -> int:
+    """Build and run the campaign; write its table, report and the estimators table."""
+    names = tuple(args.scenarios or (QUICK_SCENARIOS if args.quick else SCENARIOS))
+    seeds = args.seeds or (QUICK_SEEDS if args.quick else DEFAULT_SEEDS)
+    duration_s = args.duration or (QUICK_DURATION_S if args.quick else DEFAULT_DURATION_S)
+    for option, value in (("--seeds", seeds), ("--workers", args.workers)):
+        if value is not None and value < 1:
+            raise ScenarioError(None, option, f"must be at least 1, got {value}")
+    if not duration_s > 0:
+        raise ScenarioError(None, "--duration", f"must be > 0, got {duration_s:g}")
+    with atomic_directory(args.out) as folder:
+        campaign = build_campaign(folder / "inputs", names, seeds, duration_s)
+        results = ResultsFolder(folder / "campaign")
+        results.prepare(campaign, resume=False)
+        if not run_campaign(campaign, results, workers=args.workers):
+            raise ScenarioError(None, "--workers", "a worker process died (out of memory?)")
+        merged = results.merge(campaign)
+        columns = report_module.load_results(merged)
+        records = report_module.aggregate(columns)
+        names_ = report_module.setting_names(columns)
+        (folder / "report").mkdir()
+        write_text(
+            folder / "report" / "report.md",
+            report_module.markdown(records, names_)
+            + report_module.paired_markdown(report_module.paired_differences(columns), names_),
+        )
+        report_module.figures(records, folder / "report")
+        table = estimator_table(columns)
+        text = table_markdown(table)
+        write_text(folder / "estimators.md", text)
+        table_figure(table, folder / "estimators.png")
+    failed = sum(status != "ok" for status in columns["status"])
+    print(text, end="")
+    print(
+        f"estimators: {len(campaign.runs)} runs ({len(names)} plans x 2 fault settings x "
+        f"{seeds} seeds x {len(ESTIMATORS) - 1} runs of {duration_s:g} s), {failed} failed; "
+        f"wrote {args.out}"
+    )
+    return 1 if failed else 0
