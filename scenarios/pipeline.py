@@ -27,6 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from intervals.sonar.scan import SonarBelt
+from localization.compiled.dead_reckoning import N_MEASUREMENTS
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningNoise,
@@ -34,7 +35,6 @@ from localization.dead_reckoning import (
     initial_belief,
     odometry_data,
 )
-from localization.dead_reckoning_kernel import N_MEASUREMENTS
 from localization.fusion import fuse
 from localization.localizer import (
     BRANCHES,
