@@ -1,0 +1,365 @@
+r"""A sound contractor of pose boxes by the sonar echoes (forward-backward, before bisection).
+
+Why. SIVIA (:mod:`intervals.sivia`) only decides and bisects: a box that holds a thin strip of
+consistent poses is cut until the pieces off the strip are rejected one by one. A contractor
+shrinks the box to (a box around) the strip first, as codac's ``CtcSegment``/``CtcPolar``
+chained by HC4 do, so the paving needs fewer levels and keeps smaller boxes.
+
+Constraint (the cone model of :mod:`intervals.sonar.scan`, docs/models.md section 3). If sensor
+``i`` has an echo with distance interval ``[lo, hi]`` and its reading is right, the nearest map
+point ``P`` inside its cone is at distance ``d = d_i(p)`` in ``[lo, hi]`` along a direction
+``phi`` of the cone, on some segment ``j``:
+
+    P = s_i(p) + d u(phi),   s_i(p) = (x, y) + R(theta) m_i,
+    P in [a_j, b_j],   d in [lo, hi],   phi in theta + alpha_i + [-gamma, gamma].
+
+So ``(x, y) = P - d u(phi) - R(theta) m_i`` for some such ``P, d, phi``. Over a pose box
+``[x] x [y] x [theta]`` (HC4 on this chain, one sensor and one segment at a time):
+
+* forward: ``O_i``, a box holding ``R(theta) m_i`` for every heading of the box (the mount arc,
+  computed as the sensor boxes of :mod:`intervals.sonar.cone_kernel`, same margin); ``V_i``, a
+  box holding ``d u(phi)`` for every ``d`` and ``phi`` (the extremes of ``cos`` and ``sin`` on the
+  direction arc, :func:`intervals.sonar.cone_kernel._arc_reaches`, times ``lo`` or ``hi``);
+  ``Q_i = [x] x [y] + O_i + V_i`` holds every possible ``P``;
+* ``CtcSegment``: the part of segment ``j`` inside ``Q_i`` (a parametric clip), whose bounding
+  box ``H_ij`` holds ``P``;
+* backward: ``(x, y) in (H_ij - V_i - O_i) ∩ ([x] x [y])``.
+
+The union over the segments of these boxes holds every ``(x, y)`` of the box at which sensor
+``i``'s reading can be right: its hull ``A_i`` (empty when no segment meets ``Q_i``). Sensors
+without an echo constrain nothing here (``A_i`` is the box); an empty reading interval
+(``lo > hi``) allows nothing.
+
+q-relaxation. A pose with at most ``q`` wrong readings lies in at least ``k - q`` of the
+``A_i``, so on each axis it is at least the ``(q + 1)``-th largest lower bound of the ``A_i``
+(below that, ``q + 1`` lower bounds exceed it) and at most the ``(q + 1)``-th smallest upper
+bound. The contracted box is those bounds (the heading unchanged), or empty (marked NaN) when
+they cross: no pose of the box has at most ``q`` wrong readings. Repeated ``passes`` times
+(the narrower box gives narrower ``O_i``... chains: HC4's fixed-point loop, stopped early).
+
+Floating point (as in :mod:`intervals.sonar.geometry`): every box is widened by
+:data:`~intervals.sonar.geometry.GUARD_M` at each of the three steps (far above the few ulps
+of 1e3 m each addition or product may cost); the clip is made against ``Q_i`` widened by
+``GUARD_M``, so a clip parameter computed with a large relative error (a segment nearly
+parallel to a face) still keeps every point of the segment within the unwidened face (the
+error moves the computed crossing along the segment by less than ``GUARD_M`` across the
+face, and the coordinate is monotone along the segment). The unit vectors at the arc ends are
+those of the cone test (numpy's ``cos``/``sin`` of the heading bounds by angle addition, a few
+ulps), and a direction arc that may pass an axis is taken to pass it (``arc_slack``). Heading
+bounds beyond :data:`intervals.interval.TRIG_EXACT_LIMIT_RAD` or arcs of a full turn use the
+whole circle.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from intervals import interval as ia
+from intervals.boxes import as_boxes
+from intervals.errors import IntervalError
+from intervals.sonar import cone_kernel
+from intervals.sonar.cone import heading_trig
+from intervals.sonar.cone_kernel import (
+    COS_BETA,
+    COS_LEFT,
+    COS_RIGHT,
+    ECHO,
+    R_HI,
+    R_LO,
+    SIN_BETA,
+    SIN_LEFT,
+    SIN_RIGHT,
+)
+from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M
+from intervals.sonar.scan import SonarScan
+
+DEFAULT_PASSES = 2
+"""Forward-backward passes per call: a second pass on the narrower box contracts a little more
+(the offsets ``O_i`` are the same, the boxes ``Q_i`` narrower); a third rarely pays."""
+
+# columns of the per-sensor scratch rows: offset box O, polar box V, hit box Q, allowed A
+O_XL, O_XH, O_YL, O_YH, V_XL, V_XH, V_YL, V_YH = range(8)
+Q_XL, Q_XH, Q_YL, Q_YH, A_XL, A_XH, A_YL, A_YH = range(8, 16)
+ROW_COLUMNS = 16
+
+
+@numba.njit(cache=True)
+def _arc_extremes(ax, ay, bx, by, whole, half_turn, arc_slack):
+    """``(cos_min, cos_max, sin_min, sin_max)`` over the arc of directions counter-clockwise
+    from ``a`` to ``b`` (unit vectors): an end's value, or -+1 where the arc may pass the axis
+    direction (``whole``: the full circle)."""
+    reach = cone_kernel._arc_reaches
+    cos_max = 1.0 if whole or reach(ax, ay, bx, by, 1.0, 0.0, half_turn, arc_slack) else max(ax, bx)
+    sin_max = 1.0 if whole or reach(ax, ay, bx, by, 0.0, 1.0, half_turn, arc_slack) else max(ay, by)
+    cos_min = (
+        -1.0 if whole or reach(ax, ay, bx, by, -1.0, 0.0, half_turn, arc_slack) else min(ax, bx)
+    )
+    sin_min = (
+        -1.0 if whole or reach(ax, ay, bx, by, 0.0, -1.0, half_turn, arc_slack) else min(ay, by)
+    )
+    return cos_min, cos_max, sin_min, sin_max
+
+
+@numba.njit(cache=True)
+def _scaled(lo, hi, c_min, c_max):
+    """``[min, max]`` of ``r c`` over ``r in [lo, hi]`` (``lo >= 0``) and ``c in [c_min, c_max]``."""
+    return min(lo * c_min, hi * c_min), max(lo * c_max, hi * c_max)
+
+
+@numba.njit(cache=True)
+def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
+    """Offset boxes ``O_i``, polar boxes ``V_i`` and hit boxes ``Q_i`` of every echo sensor for
+    one pose box, into ``rows (k, ROW_COLUMNS)``; ``A_i`` set empty (filled by the segments).
+    ``params = (half_aperture_rad, margin_m, guard_m, arc_slack, angle_margin_rad,
+    trig_limit_rad)``. Returns the hull ``(x_lo, x_hi, y_lo, y_hi)`` of the ``Q_i``."""
+    gamma, margin_m, guard_m, arc_slack, angle_margin, trig_limit = (
+        params[0],
+        params[1],
+        params[2],
+        params[3],
+        params[4],
+        params[5],
+    )
+    theta_lo, theta_hi = box[2, 0], box[2, 1]
+    width = theta_hi - theta_lo
+    trusted = abs(theta_lo) < trig_limit and abs(theta_hi) < trig_limit
+    mount_whole = not trusted or width >= 2.0 * np.pi - angle_margin
+    mount_half = width >= np.pi - angle_margin
+    cone_width = width + 2.0 * gamma
+    cone_whole = not trusted or cone_width >= 2.0 * np.pi - angle_margin
+    cone_half = cone_width >= np.pi - angle_margin
+    cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
+    hx_lo, hx_hi, hy_lo, hy_hi = np.inf, -np.inf, np.inf, -np.inf
+    for i in range(belt.shape[0]):
+        rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = np.inf, -np.inf, np.inf, -np.inf
+        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
+            continue
+        # O_i: the mount m_i turned by every heading of the box
+        cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
+        ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb
+        bx, by = cos_hi * cb - sin_hi * sb, sin_hi * cb + cos_hi * sb
+        c_min, c_max, s_min, s_max = _arc_extremes(
+            ax, ay, bx, by, mount_whole, mount_half, arc_slack
+        )
+        r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
+        ox_lo, ox_hi = _scaled(r_lo, r_hi, c_min, c_max)
+        oy_lo, oy_hi = _scaled(r_lo, r_hi, s_min, s_max)
+        rows[i, O_XL], rows[i, O_XH] = ox_lo - margin_m, ox_hi + margin_m
+        rows[i, O_YL], rows[i, O_YH] = oy_lo - margin_m, oy_hi + margin_m
+        # V_i: d u(phi), d in [lo, hi], phi from theta_lo + alpha - gamma to theta_hi + alpha + gamma
+        cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
+        cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
+        ax, ay = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
+        bx, by = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
+        c_min, c_max, s_min, s_max = _arc_extremes(ax, ay, bx, by, cone_whole, cone_half, arc_slack)
+        lo, hi = ranges[i, 0], ranges[i, 1]
+        vx_lo, vx_hi = _scaled(lo, hi, c_min, c_max)
+        vy_lo, vy_hi = _scaled(lo, hi, s_min, s_max)
+        rows[i, V_XL], rows[i, V_XH] = vx_lo - guard_m, vx_hi + guard_m
+        rows[i, V_YL], rows[i, V_YH] = vy_lo - guard_m, vy_hi + guard_m
+        # Q_i = box + O_i + V_i, widened
+        q_xl = box[0, 0] + rows[i, O_XL] + rows[i, V_XL] - guard_m
+        q_xh = box[0, 1] + rows[i, O_XH] + rows[i, V_XH] + guard_m
+        q_yl = box[1, 0] + rows[i, O_YL] + rows[i, V_YL] - guard_m
+        q_yh = box[1, 1] + rows[i, O_YH] + rows[i, V_YH] + guard_m
+        rows[i, Q_XL], rows[i, Q_XH], rows[i, Q_YL], rows[i, Q_YH] = q_xl, q_xh, q_yl, q_yh
+        hx_lo, hx_hi = min(hx_lo, q_xl), max(hx_hi, q_xh)
+        hy_lo, hy_hi = min(hy_lo, q_yl), max(hy_hi, q_yh)
+    return hx_lo, hx_hi, hy_lo, hy_hi
+
+
+@numba.njit(cache=True)
+def _clip_axis(a, e, lo, hi, t0, t1):
+    """Narrow ``[t0, t1]`` to the ``t`` with ``a + t e`` in ``[lo, hi]`` (one coordinate)."""
+    if e > 0.0:
+        t0 = max(t0, (lo - a) / e)
+        t1 = min(t1, (hi - a) / e)
+    elif e < 0.0:
+        t0 = max(t0, (hi - a) / e)
+        t1 = min(t1, (lo - a) / e)
+    elif not (lo <= a <= hi):
+        t1 = -np.inf
+    return t0, t1
+
+
+@numba.njit(cache=True)
+def _segment_backward(ax, ay, ex, ey, box, rows, kind, ranges, guard_m):
+    """Segment ``a + t e`` against every echo sensor: widen ``A_i`` by the robot positions of
+    the box from which ``i`` may hit it (``CtcSegment`` then the backward step)."""
+    sx_lo, sx_hi = min(ax, ax + ex), max(ax, ax + ex)
+    sy_lo, sy_hi = min(ay, ay + ey), max(ay, ay + ey)
+    for i in range(rows.shape[0]):
+        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
+            continue
+        row = rows[i]
+        if sx_hi < row[Q_XL] or sx_lo > row[Q_XH] or sy_hi < row[Q_YL] or sy_lo > row[Q_YH]:
+            continue
+        t0, t1 = _clip_axis(ax, ex, row[Q_XL], row[Q_XH], 0.0, 1.0)
+        t0, t1 = _clip_axis(ay, ey, row[Q_YL], row[Q_YH], t0, t1)
+        if not t0 <= t1:
+            continue
+        p0x, p0y, p1x, p1y = ax + t0 * ex, ay + t0 * ey, ax + t1 * ex, ay + t1 * ey
+        h_xl = max(min(p0x, p1x) - guard_m, row[Q_XL])
+        h_xh = min(max(p0x, p1x) + guard_m, row[Q_XH])
+        h_yl = max(min(p0y, p1y) - guard_m, row[Q_YL])
+        h_yh = min(max(p0y, p1y) + guard_m, row[Q_YH])
+        # backward: (x, y) in H - V - O, within the box
+        x_lo = max(h_xl - row[V_XH] - row[O_XH] - guard_m, box[0, 0])
+        x_hi = min(h_xh - row[V_XL] - row[O_XL] + guard_m, box[0, 1])
+        y_lo = max(h_yl - row[V_YH] - row[O_YH] - guard_m, box[1, 0])
+        y_hi = min(h_yh - row[V_YL] - row[O_YL] + guard_m, box[1, 1])
+        if x_lo <= x_hi and y_lo <= y_hi:
+            row[A_XL], row[A_XH] = min(row[A_XL], x_lo), max(row[A_XH], x_hi)
+            row[A_YL], row[A_YH] = min(row[A_YL], y_lo), max(row[A_YH], y_hi)
+
+
+@numba.njit(cache=True)
+def _relaxed_bounds(rows, kind, box, q, lows, highs):
+    """The q-relaxed ``(x_lo, x_hi, y_lo, y_hi)``: per axis the ``(q + 1)``-th largest lower
+    bound and the ``(q + 1)``-th smallest upper bound of the sensors' allowed boxes (a sensor
+    without an echo allows the whole box)."""
+    k = rows.shape[0]
+    out = np.empty(4)
+    for axis in range(2):
+        for i in range(k):
+            if kind[i] == ECHO:
+                lows[i] = rows[i, A_XL + 2 * axis]
+                highs[i] = rows[i, A_XH + 2 * axis]
+            else:
+                lows[i], highs[i] = box[axis, 0], box[axis, 1]
+        lows.sort()
+        highs.sort()
+        out[2 * axis] = max(lows[k - 1 - q], box[axis, 0]) if q < k else box[axis, 0]
+        out[2 * axis + 1] = min(highs[q], box[axis, 1]) if q < k else box[axis, 1]
+    return out
+
+
+@numba.njit(cache=True)
+def contract_into(
+    boxes,
+    cos_theta,
+    sin_theta,
+    segments,
+    allowed,
+    grid_origin,
+    grid_cell_m,
+    grid_shape,
+    grid_starts,
+    grid_members,
+    ranges,
+    kind,
+    belt,
+    params,
+    q,
+    passes,
+    out,
+):
+    """Contract every box of ``boxes (N, 3, 2)`` into ``out (N, 3, 2)`` (module doc).
+
+    ``cos_theta, sin_theta (N, 2)``: of the heading bounds (:func:`intervals.sonar.cone.heading_trig`);
+    ``segments (M, 2, 2)`` of the scene, those with ``allowed (M,)`` taking part, looked up in
+    the scene's grid (``grid_*``, as in :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`);
+    ``ranges (k, 2)``, ``kind (k,)``: the scan's reading intervals; ``belt (k, 8)``: the belt's
+    kernel table; ``params``: see :func:`_forward_rows`; ``q``: the relaxation; ``passes``:
+    forward-backward passes. An empty result row is all NaN.
+    """
+    k = belt.shape[0]
+    rows = np.empty((k, ROW_COLUMNS))
+    lows, highs = np.empty(k), np.empty(k)
+    guard_m = params[2]
+    nx, ny = grid_shape[0], grid_shape[1]
+    seen = np.zeros(segments.shape[0], dtype=np.int64)
+    stamp = 0
+    work = np.empty((3, 2))
+    for n in range(boxes.shape[0]):
+        work[:, :] = boxes[n]
+        empty = False
+        for _ in range(passes):
+            hx_lo, hx_hi, hy_lo, hy_hi = _forward_rows(
+                work, cos_theta[n], sin_theta[n], belt, ranges, kind, params, rows
+            )
+            if hx_lo <= hx_hi:  # some echo: gather the segments that may meet a hit box
+                stamp += 1
+                cx, cy = (hx_lo + hx_hi) / 2.0, (hy_lo + hy_hi) / 2.0
+                radius = math.hypot((hx_hi - hx_lo) / 2.0, (hy_hi - hy_lo) / 2.0) + guard_m
+                ix0 = max(math.floor((cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
+                ix1 = min(math.floor((cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
+                iy0 = max(math.floor((cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
+                iy1 = min(math.floor((cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+                for ix in range(ix0, ix1 + 1):
+                    for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
+                        for member in range(grid_starts[cell], grid_starts[cell + 1]):
+                            j = grid_members[member]
+                            if seen[j] == stamp or not allowed[j]:
+                                continue
+                            seen[j] = stamp
+                            ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+                            ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
+                            _segment_backward(ax, ay, ex, ey, work, rows, kind, ranges, guard_m)
+            b = _relaxed_bounds(rows, kind, work, q, lows, highs)
+            if not (b[0] <= b[1] and b[2] <= b[3]):
+                empty = True
+                break
+            unchanged = (
+                b[0] == work[0, 0] and b[1] == work[0, 1] and b[2] == work[1, 0] and b[3] == work[1, 1]
+            )
+            work[0, 0], work[0, 1], work[1, 0], work[1, 1] = b[0], b[1], b[2], b[3]
+            if unchanged:
+                break
+        if empty:
+            out[n, :, :] = np.nan
+        else:
+            out[n] = work
+
+
+def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -> np.ndarray:
+    """Pose boxes ``(N, 3, 2)`` contracted by the scan's echoes at relaxation ``q`` (module
+    doc): each row lies in the input row and holds every pose of it at which at most ``q``
+    readings are wrong; a row with no such pose is NaN. The heading is left as it is."""
+    boxes = np.ascontiguousarray(as_boxes(boxes), dtype=np.float64)
+    if boxes.shape[1] != 3:
+        raise IntervalError(f"contractor: pose boxes must be (N, 3, 2), got {boxes.shape}")
+    if not (isinstance(q, (int, np.integer)) and q >= 0):
+        raise IntervalError(f"contractor: q must be a non-negative integer, got {q!r}")
+    if not (isinstance(passes, (int, np.integer)) and passes >= 1):
+        raise IntervalError(f"contractor: passes must be an integer >= 1, got {passes!r}")
+    out = np.empty_like(boxes)
+    if boxes.shape[0] == 0:
+        return out
+    belt = scan.belt
+    assert scan.scene is not None
+    grid = scan.scene.grid
+    params = np.array(
+        [
+            belt.half_aperture_rad,
+            belt.sensor_box_margin_m,
+            GUARD_M,
+            ARC_SLACK,
+            ANGLE_MARGIN_RAD,
+            ia.TRIG_EXACT_LIMIT_RAD,
+        ]
+    )
+    cos_theta, sin_theta = heading_trig(boxes)
+    contract_into(
+        boxes,
+        np.ascontiguousarray(cos_theta),
+        np.ascontiguousarray(sin_theta),
+        scan.scene.segments,
+        scan.allowed,
+        grid.origin,
+        grid.cell_m,
+        np.array(grid.shape, dtype=np.int64),
+        grid.starts,
+        grid.members,
+        scan.ranges,
+        scan.kind,
+        belt.kernel_table,
+        params,
+        int(q),
+        int(passes),
+        out,
+    )
+    return out
