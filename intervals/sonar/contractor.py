@@ -134,7 +134,12 @@ def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
     cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
     hx_lo, hx_hi, hy_lo, hy_hi = np.inf, -np.inf, np.inf, -np.inf
     for i in range(belt.shape[0]):
-        rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = np.inf, -np.inf, np.inf, -np.inf
+        rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = (
+            np.inf,
+            -np.inf,
+            np.inf,
+            -np.inf,
+        )
         if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
             continue
         # O_i: the mount m_i turned by every heading of the box
@@ -304,7 +309,10 @@ def contract_into(
                 empty = True
                 break
             unchanged = (
-                b[0] == work[0, 0] and b[1] == work[0, 1] and b[2] == work[1, 0] and b[3] == work[1, 1]
+                b[0] == work[0, 0]
+                and b[1] == work[0, 1]
+                and b[2] == work[1, 0]
+                and b[3] == work[1, 1]
             )
             work[0, 0], work[0, 1], work[1, 0], work[1, 1] = b[0], b[1], b[2], b[3]
             if unchanged:
