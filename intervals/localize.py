@@ -189,7 +189,22 @@ def _pave(
     if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
         reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
         rejects = recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
+    if contract and paving.boundary.shape[0]:
+        paving, rejects = _shaved(paving, rejects, local, q, engine)
     return paving, rejects
+
+
+def _shaved(paving: Subpaving, rejects: np.ndarray, local: SonarScan, q: int, engine: str):
+    """The boundary boxes narrowed by :func:`intervals.sonar.contractor.shave` (cone and room
+    tests at ``q``), with their counts: a box's count, the sensors rejecting it, holds for its
+    parts (each rejects every pose of the box), so GOMNE's ``count <= q`` sets stay sound."""
+    boxes = paving.boundary
+
+    def rejected(slices):
+        return _test_and_counts(slices, local, q, False, engine)[0] == OUTSIDE
+
+    shaved, rows = contractor.shave(boxes, rejected, local, q)
+    return Subpaving(paving.inner, shaved, coarse=paving.coarse), rejects[rows]
 
 
 def localize(

@@ -35,7 +35,18 @@ q-relaxation. A pose with at most ``q`` wrong readings lies in at least ``k - q`
 (below that, ``q + 1`` lower bounds exceed it) and at most the ``(q + 1)``-th smallest upper
 bound. The contracted box is those bounds (the heading unchanged), or empty (marked NaN) when
 they cross: no pose of the box has at most ``q`` wrong readings. Repeated ``passes`` times
-(the narrower box gives narrower ``O_i``... chains: HC4's fixed-point loop, stopped early).
+on the narrower box (HC4's fixed-point loop, stopped early), or until nothing moves. The
+segment loop of a box stops once at most ``q`` echo sensors can still contract it (each other
+one allows the whole box already, so no ``(q + 1)``-th bound can move: the box is returned as
+it is, which is always sound).
+
+Cost. Each segment is checked against the hull of the ``Q_i`` by its bounding box (the scan's
+segments are those within reach of the paved boxes), then against each ``Q_i``; about the
+cost of the box test per box (``benchmarks/tightness.py``).
+
+Shaving (:func:`shave`): the heading, which this chain does not narrow, and the faces the
+free-space part of the cone test can cut, are narrowed after SIVIA by testing thin slices at
+each face of the boxes kept with the sound box test (3B consistency).
 
 Floating point (as in :mod:`intervals.sonar.geometry`): every box is widened by
 :data:`~intervals.sonar.geometry.GUARD_M` at each of the three steps (far above the few ulps
@@ -52,7 +63,7 @@ whole circle.
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -79,6 +90,14 @@ from intervals.sonar.scan import SonarScan
 DEFAULT_PASSES = 2
 """Forward-backward passes per call: a second pass on the narrower box contracts a little more
 (the offsets ``O_i`` are the same, the boxes ``Q_i`` narrower); a third rarely pays."""
+
+SHAVE_ROUNDS = 2
+"""Rounds of :func:`shave` (each: the six faces, then :func:`contract`). Measured on ``hall``'s
+tracking epochs (``benchmarks/tightness.py``): one round halves the outer volume at eps 0.05,
+a second takes another fifth, more rounds little."""
+
+SHAVE_FRACTION = 0.25
+"""Width of the slice :func:`shave` tests at a face, as a fraction of the box's width there."""
 
 # columns of the per-sensor scratch rows: offset box O, polar box V, hit box Q, allowed A
 O_XL, O_XH, O_YL, O_YH, V_XL, V_XH, V_YL, V_YH = range(8)
@@ -191,13 +210,16 @@ def _clip_axis(a, e, lo, hi, t0, t1):
 
 
 @numba.njit(cache=True)
-def _segment_backward(ax, ay, ex, ey, box, rows, kind, ranges, guard_m):
-    """Segment ``a + t e`` against every echo sensor: widen ``A_i`` by the robot positions of
-    the box from which ``i`` may hit it (``CtcSegment`` then the backward step)."""
+def _segment_backward(ax, ay, ex, ey, box, rows, done, guard_m):
+    """Segment ``a + t e`` against every echo sensor not ``done``: widen ``A_i`` by the robot
+    positions of the box from which ``i`` may hit it (``CtcSegment`` then the backward step);
+    mark ``done`` the sensors whose ``A_i`` has become the whole box (no segment can change it
+    then). Returns how many were marked."""
     sx_lo, sx_hi = min(ax, ax + ex), max(ax, ax + ex)
     sy_lo, sy_hi = min(ay, ay + ey), max(ay, ay + ey)
+    marked = 0
     for i in range(rows.shape[0]):
-        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
+        if done[i]:
             continue
         row = rows[i]
         if sx_hi < row[Q_XL] or sx_lo > row[Q_XH] or sy_hi < row[Q_YL] or sy_lo > row[Q_YH]:
@@ -219,6 +241,15 @@ def _segment_backward(ax, ay, ex, ey, box, rows, kind, ranges, guard_m):
         if x_lo <= x_hi and y_lo <= y_hi:
             row[A_XL], row[A_XH] = min(row[A_XL], x_lo), max(row[A_XH], x_hi)
             row[A_YL], row[A_YH] = min(row[A_YL], y_lo), max(row[A_YH], y_hi)
+            if (
+                row[A_XL] <= box[0, 0]
+                and row[A_XH] >= box[0, 1]
+                and row[A_YL] <= box[1, 0]
+                and row[A_YH] >= box[1, 1]
+            ):
+                done[i] = True
+                marked += 1
+    return marked
 
 
 @numba.njit(cache=True)
@@ -248,12 +279,6 @@ def contract_into(
     cos_theta,
     sin_theta,
     segments,
-    allowed,
-    grid_origin,
-    grid_cell_m,
-    grid_shape,
-    grid_starts,
-    grid_members,
     ranges,
     kind,
     belt,
@@ -265,8 +290,9 @@ def contract_into(
     """Contract every box of ``boxes (N, 3, 2)`` into ``out (N, 3, 2)`` (module doc).
 
     ``cos_theta, sin_theta (N, 2)``: of the heading bounds (:func:`intervals.sonar.cone.heading_trig`);
-    ``segments (M, 2, 2)`` of the scene, those with ``allowed (M,)`` taking part, looked up in
-    the scene's grid (``grid_*``, as in :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`);
+    ``segments (M, 2, 2)``: the scan's (those within reach of the boxes,
+    :meth:`intervals.sonar.scan.SonarScan.restricted_to`), each skipped unless its bounding box
+    meets the hull of the hit boxes;
     ``ranges (k, 2)``, ``kind (k,)``: the scan's reading intervals; ``belt (k, 8)``: the belt's
     kernel table; ``params``: see :func:`_forward_rows`; ``q``: the relaxation; ``passes``:
     forward-backward passes. An empty result row is all NaN.
@@ -274,10 +300,8 @@ def contract_into(
     k = belt.shape[0]
     rows = np.empty((k, ROW_COLUMNS))
     lows, highs = np.empty(k), np.empty(k)
+    done = np.empty(k, dtype=np.bool_)  # the sensor's A_i can change no more
     guard_m = params[2]
-    nx, ny = grid_shape[0], grid_shape[1]
-    seen = np.zeros(segments.shape[0], dtype=np.int64)
-    stamp = 0
     work = np.empty((3, 2))
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
@@ -286,24 +310,26 @@ def contract_into(
             hx_lo, hx_hi, hy_lo, hy_hi = _forward_rows(
                 work, cos_theta[n], sin_theta[n], belt, ranges, kind, params, rows
             )
-            if hx_lo <= hx_hi:  # some echo: gather the segments that may meet a hit box
-                stamp += 1
-                cx, cy = (hx_lo + hx_hi) / 2.0, (hy_lo + hy_hi) / 2.0
-                radius = math.hypot((hx_hi - hx_lo) / 2.0, (hy_hi - hy_lo) / 2.0) + guard_m
-                ix0 = max(math.floor((cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
-                ix1 = min(math.floor((cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
-                iy0 = max(math.floor((cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
-                iy1 = min(math.floor((cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
-                for ix in range(ix0, ix1 + 1):
-                    for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
-                        for member in range(grid_starts[cell], grid_starts[cell + 1]):
-                            j = grid_members[member]
-                            if seen[j] == stamp or not allowed[j]:
-                                continue
-                            seen[j] = stamp
-                            ax, ay = segments[j, 0, 0], segments[j, 0, 1]
-                            ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-                            _segment_backward(ax, ay, ex, ey, work, rows, kind, ranges, guard_m)
+            # sensors that can still contract: the echoes (A_i starts empty); once at most q
+            # remain, no face can move (the (q + 1)-th bound is the box's), so stop early
+            # (an empty reading interval counts as remaining: it never allows the whole box)
+            remaining = 0
+            for i in range(k):
+                done[i] = not (kind[i] == ECHO and ranges[i, 0] <= ranges[i, 1])
+                remaining += 1 if kind[i] == ECHO else 0
+            if hx_lo <= hx_hi:  # some echo: the segments whose bounding box meets a hit box
+                for j in range(segments.shape[0]):
+                    if remaining <= q:
+                        break
+                    ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+                    bx, by = segments[j, 1, 0], segments[j, 1, 1]
+                    if max(ax, bx) < hx_lo or min(ax, bx) > hx_hi:
+                        continue
+                    if max(ay, by) < hy_lo or min(ay, by) > hy_hi:
+                        continue
+                    remaining -= _segment_backward(
+                        ax, ay, bx - ax, by - ay, work, rows, done, guard_m
+                    )
             b = _relaxed_bounds(rows, kind, work, q, lows, highs)
             if not (b[0] <= b[1] and b[2] <= b[3]):
                 empty = True
@@ -338,8 +364,6 @@ def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -
     if boxes.shape[0] == 0:
         return out
     belt = scan.belt
-    assert scan.scene is not None
-    grid = scan.scene.grid
     params = np.array(
         [
             belt.half_aperture_rad,
@@ -355,13 +379,7 @@ def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -
         boxes,
         np.ascontiguousarray(cos_theta),
         np.ascontiguousarray(sin_theta),
-        scan.scene.segments,
-        scan.allowed,
-        grid.origin,
-        grid.cell_m,
-        np.array(grid.shape, dtype=np.int64),
-        grid.starts,
-        grid.members,
+        np.ascontiguousarray(scan.segments),
         scan.ranges,
         scan.kind,
         belt.kernel_table,
@@ -371,3 +389,45 @@ def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -
         out,
     )
     return out
+
+
+def shave(
+    boxes: np.ndarray,
+    rejected: Callable[[np.ndarray], np.ndarray],
+    scan: SonarScan,
+    q: int,
+    rounds: int = SHAVE_ROUNDS,
+    fraction: float = SHAVE_FRACTION,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(shaved (K, 3, 2), rows (K,))``: the boxes ``(N, 3, 2)`` narrowed by shaving (3B
+    consistency, one slice per face), those emptied by :func:`contract` dropped; ``rows`` are the
+    input rows of the boxes kept.
+
+    ``rejected(slices (M, 3, 2)) -> (M,) bool``: a sound box test (True only when no pose of the
+    slice is in the set). Each round, for the heading then x then y, the slices of width
+    ``fraction`` of the box's width at its two faces are tested in one call, and a rejected slice
+    is cut off (the slice ``[lo, fl(lo + w f)]`` and the rest ``[fl(lo + w f), hi]`` share that
+    float bound, so they cover the box: no pose outside the rejected slice is lost; with
+    ``fraction < 1/2`` the two slices never overlap, so the box never empties); then the round
+    ends with :func:`contract` at relaxation ``q``. Every pose the test and the contractor keep
+    stays in its box.
+    """
+    boxes = np.array(boxes, dtype=np.float64)
+    rows = np.arange(boxes.shape[0])
+    for _ in range(rounds):
+        n = boxes.shape[0]
+        if n == 0:
+            break
+        for axis in (2, 0, 1):
+            lo, hi = boxes[:, axis, 0], boxes[:, axis, 1]
+            cut = fraction * (hi - lo)
+            left, right = boxes.copy(), boxes.copy()
+            left[:, axis, 1] = lo + cut
+            right[:, axis, 0] = hi - cut
+            out = np.asarray(rejected(np.concatenate([left, right])), dtype=bool)
+            boxes[out[:n], axis, 0] = left[out[:n], axis, 1]
+            boxes[out[n:], axis, 1] = right[out[n:], axis, 0]
+        boxes = contract(boxes, scan, q)
+        full = ~np.isnan(boxes).any(axis=(1, 2))
+        boxes, rows = boxes[full], rows[full]
+    return boxes, rows
