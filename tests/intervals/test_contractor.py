@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 
 from intervals.boxes import volume
 from intervals.errors import IntervalError
-from intervals.localize import gomne, localize
+from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
-from intervals.sonar.contractor import contract
+from intervals.sonar.contractor import contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
 from tests.helpers import DEFAULT_BELT, boxes_around, cone_ranges, random_scan_case
@@ -37,6 +38,18 @@ def _wrong_echoes(poses, scan: SonarScan, params) -> np.ndarray:
     return np.count_nonzero(np.isfinite(m) & ~explained, axis=-1)
 
 
+def _wrong_readings(poses, scan: SonarScan, params) -> np.ndarray:
+    """Readings the poses do not explain, no-echo readings included where they prove free
+    space (``echoes_never_lost``), and poses outside the room counted as explaining none."""
+    wrong = _wrong_echoes(poses, scan, params)
+    if scan.belt.echoes_never_lost:
+        d = cone_ranges(poses, scan.segments, params)
+        free = ~np.isfinite(scan.readings_m)
+        wrong = wrong + np.count_nonzero(free & (d <= params.d_max_m), axis=-1)
+    room = shapely.contains_xy(shapely.Polygon(scan.boundary), poses[..., 0], poses[..., 1])
+    return np.where(room, wrong, scan.belt.count + 1)
+
+
 def _with_outliers(scan: SonarScan, rng, count: int) -> SonarScan:
     """The scan with ``count`` readings replaced by uniform values in ``[0, d_max]``."""
     readings = scan.readings_m.copy()
@@ -51,6 +64,7 @@ def _sample(boxes, truth, rng, count):
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     frac = np.concatenate([CORNERS, rng.uniform(0, 1, (count, 3))])
     uniform = lo[:, None] + frac[None] * (hi - lo)[:, None]
+    uniform = np.clip(uniform, lo[:, None], hi[:, None])  # lo + (hi - lo) may round past hi
     near = truth + rng.normal(0, 1, (boxes.shape[0], 16, 3)) * np.array([0.03, 0.03, 0.02])
     near = np.clip(near, lo[:, None], hi[:, None])
     return np.concatenate([uniform, near], axis=1)
@@ -119,6 +133,36 @@ def test_impossible_reading_empties_and_no_echo_leaves_the_box():
     assert scan.ranges[0, 0] > scan.ranges[0, 1]  # the reading's interval is empty
     assert np.isnan(contract(box, scan, 0)).all()
     assert not np.isnan(contract(box, scan, 1)).any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gamma", GAMMAS_RAD[1:3])
+def test_shaving_keeps_every_consistent_pose_and_narrows_the_heading(gamma):
+    """Shaving with the box test (cone and room tests at q) against brute force: no sampled
+    pose explaining all but q readings leaves its box; the headings get narrower."""
+    rng = np.random.default_rng(int(gamma * 1e6) + 5)
+    kept, widths = 0, []
+    for case in range(16):
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        q = case % 2
+        scan = _with_outliers(scan, rng, q)
+        centre = truth + rng.normal(0, 1, (40, 3)) * np.array([0.03, 0.03, 0.02])
+        half = rng.uniform(0.01, 0.05, (40, 3))
+        boxes = np.stack([centre - half, centre + half], axis=-1)
+        local = scan.restricted_to(boxes)
+        shaved, rows = shave(
+            boxes, lambda b, s=local, r=q: box_test(b, s, r, inner=False) == OUTSIDE, local, q
+        )
+        assert np.all(shaved[:, :, 0] >= boxes[rows, :, 0])
+        assert np.all(shaved[:, :, 1] <= boxes[rows, :, 1])
+        poses = _sample(boxes, truth, rng, 40)
+        fits = _wrong_readings(poses, scan, params) <= q
+        placed = np.zeros(fits.shape, dtype=bool)
+        placed[rows] = _inside(poses[rows], shaved)
+        assert not np.any(fits & ~placed), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+        widths.append(np.mean(shaved[:, 2, 1] - shaved[:, 2, 0]) / np.mean(2 * half[rows, 2]))
+    assert kept > 50 and np.mean(widths) < 0.9
 
 
 def test_bad_arguments_raise_interval_error():
