@@ -144,9 +144,11 @@ def _pave(
 
     With ``contract`` every SIVIA frontier is first contracted by
     :func:`intervals.sonar.contractor.contract` at the same ``q`` (it keeps every pose with at
-    most ``q`` wrong readings, so the set and the counts stay sound).
+    most ``q`` wrong readings, so the set and the counts stay sound), and the boundary boxes of
+    a paving not cut short are shaved (:func:`_shaved`), within the budget's tests when there
+    is one (fewer rounds, or none, when the tests left do not allow them).
     """
-    stored, counts = [], []
+    stored, counts, tested = [], [], [0]
 
     def recount(b, reject):
         return rays.joint_rejection_counts(
@@ -154,6 +156,7 @@ def _pave(
         )
 
     def test(b):
+        tested[0] += b.shape[0]
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
         keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
@@ -189,21 +192,26 @@ def _pave(
     if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
         reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
         rejects = recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
-    if contract and paving.boundary.shape[0]:
-        paving, rejects = _shaved(paving, rejects, local, q, engine)
+    n = paving.boundary.shape[0]
+    rounds = contractor.SHAVE_ROUNDS
+    if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
+        rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
+    if contract and n and rounds:
+        paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
     return paving, rejects
 
 
-def _shaved(paving: Subpaving, rejects: np.ndarray, local: SonarScan, q: int, engine: str):
+def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
     """The boundary boxes narrowed by :func:`intervals.sonar.contractor.shave` (cone and room
-    tests at ``q``), with their counts: a box's count, the sensors rejecting it, holds for its
-    parts (each rejects every pose of the box), so GOMNE's ``count <= q`` sets stay sound."""
+    tests at ``q``, ``rounds`` rounds, at most ``max_boxes`` slices a call), with their counts: a
+    box's count, the sensors rejecting it, holds for its parts (each rejects every pose of the
+    box), so GOMNE's ``count <= q`` sets stay sound."""
     boxes = paving.boundary
 
     def rejected(slices):
         return _test_and_counts(slices, local, q, False, engine)[0] == OUTSIDE
 
-    shaved, rows = contractor.shave(boxes, rejected, local, q)
+    shaved, rows = contractor.shave(boxes, rejected, local, q, rounds, max_per_call=max_boxes)
     return Subpaving(paving.inner, shaved, coarse=paving.coarse), rejects[rows]
 
 

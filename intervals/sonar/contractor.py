@@ -398,6 +398,7 @@ def shave(
     q: int,
     rounds: int = SHAVE_ROUNDS,
     fraction: float = SHAVE_FRACTION,
+    max_per_call: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(shaved (K, 3, 2), rows (K,))``: the boxes ``(N, 3, 2)`` narrowed by shaving (3B
     consistency, one slice per face), those emptied by :func:`contract` dropped; ``rows`` are the
@@ -410,7 +411,8 @@ def shave(
     float bound, so they cover the box: no pose outside the rejected slice is lost; with
     ``fraction < 1/2`` the two slices never overlap, so the box never empties); then the round
     ends with :func:`contract` at relaxation ``q``. Every pose the test and the contractor keep
-    stays in its box.
+    stays in its box. ``max_per_call``: the most slices handed to ``rejected`` at once (None: all
+    ``2 N`` of an axis in one call). The test sees ``6 N rounds`` slices in all.
     """
     boxes = np.array(boxes, dtype=np.float64)
     rows = np.arange(boxes.shape[0])
@@ -424,7 +426,14 @@ def shave(
             left, right = boxes.copy(), boxes.copy()
             left[:, axis, 1] = lo + cut
             right[:, axis, 0] = hi - cut
-            out = np.asarray(rejected(np.concatenate([left, right])), dtype=bool)
+            slices = np.concatenate([left, right])
+            step = slices.shape[0] if max_per_call is None else max(1, max_per_call)
+            out = np.concatenate(
+                [
+                    np.asarray(rejected(slices[start : start + step]), dtype=bool)
+                    for start in range(0, slices.shape[0], step)
+                ]
+            )
             boxes[out[:n], axis, 0] = left[out[:n], axis, 1]
             boxes[out[n:], axis, 1] = right[out[n:], axis, 0]
         boxes = contract(boxes, scan, q)
