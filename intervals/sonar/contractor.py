@@ -305,6 +305,12 @@ def contract_into(
     lows, highs = np.empty(k), np.empty(k)
     done = np.empty(k, dtype=np.bool_)  # the sensor's A_i can change no more
     guard_m = params[2]
+    echoes = 0
+    for i in range(k):
+        echoes += 1 if kind[i] == ECHO else 0
+    if echoes <= q:  # no (q + 1)-th bound can move (see the module doc): nothing to contract
+        out[:, :, :] = boxes
+        return
     work = np.empty((3, 2))
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
