@@ -27,6 +27,7 @@ from intervals.boxes import (
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen
 from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, sivia
+from intervals.sonar import contractor
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -85,6 +86,12 @@ def _checked_budget(max_boxes) -> None:
         raise IntervalError(f"max_boxes must be None or an integer >= 8, got {max_boxes!r}")
 
 
+def _checked_contract(contract) -> bool:
+    if not isinstance(contract, bool):
+        raise IntervalError(f"contract must be True or False, got {contract!r}")
+    return contract
+
+
 def _initial_poses(initial) -> np.ndarray:
     boxes = as_boxes(initial, "initial pose boxes")
     if boxes.shape[1] != 3:
@@ -103,7 +110,17 @@ def uses_ray_test(ray_test: bool | None, belt: SonarBelt) -> bool:
 
 
 def _pave(
-    local: SonarScan, boxes, eps, q, scale, inner, splits_per_level, engine, ray_test, max_boxes
+    local: SonarScan,
+    boxes,
+    eps,
+    q,
+    scale,
+    inner,
+    splits_per_level,
+    engine,
+    ray_test,
+    max_boxes,
+    contract=True,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,))`` with the number of
     sensors rejecting each boundary box, kept from the SIVIA level that stored the box (the
@@ -124,8 +141,14 @@ def _pave(
     count is never below the cone test's, so GOMNE's ``count <= q`` sets stay sound. Only the
     stored boxes are tested: rejecting those is all that changes the outer set (testing every
     level gave the same volumes at twice the time).
+
+    With ``contract`` every SIVIA frontier is first contracted by
+    :func:`intervals.sonar.contractor.contract` at the same ``q`` (it keeps every pose with at
+    most ``q`` wrong readings, so the set and the counts stay sound), and the boundary boxes of
+    a paving not cut short are shaved (:func:`_shaved`), within the budget's tests when there
+    is one (fewer rounds, or none, when the tests left do not allow them).
     """
-    stored, counts = [], []
+    stored, counts, tested = [], [], [0]
 
     def recount(b, reject):
         from intervals.sonar import rays  # its kernels compile only for runs with the ray test
@@ -135,6 +158,7 @@ def _pave(
         )
 
     def test(b):
+        tested[0] += b.shape[0]
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
         keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
@@ -155,6 +179,7 @@ def _pave(
         splits_per_level=splits_per_level,
         min_level_boxes=MIN_LEVEL_BOXES,
         max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
+        contract=(lambda b: contractor.contract(b, local, q)) if contract else None,
     )
     if max_boxes is not None and paving.outer.shape[0] > max_boxes:
         merged = coarsen(paving.outer, max_boxes, scale)
@@ -165,11 +190,31 @@ def _pave(
             rejects = recount(paving.boundary, reject)
         keep = (verdicts != OUTSIDE) & (rejects <= q)
         return Subpaving(paving.inner, paving.boundary[keep], coarse=True), rejects[keep]
-    rejects = np.concatenate(counts)
-    if not np.array_equal(np.concatenate(stored), paving.boundary):
+    rejects = np.concatenate(counts) if counts else np.zeros(0, dtype=np.intp)
+    if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
         reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
         rejects = recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
+    n = paving.boundary.shape[0]
+    rounds = contractor.SHAVE_ROUNDS
+    if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
+        rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
+    if contract and n and rounds:
+        paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
     return paving, rejects
+
+
+def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
+    """The boundary boxes narrowed by :func:`intervals.sonar.contractor.shave` (cone and room
+    tests at ``q``, ``rounds`` rounds, at most ``max_boxes`` slices a call), with their counts: a
+    box's count, the sensors rejecting it, holds for its parts (each rejects every pose of the
+    box), so GOMNE's ``count <= q`` sets stay sound."""
+    boxes = paving.boundary
+
+    def rejected(slices):
+        return _test_and_counts(slices, local, q, False, engine)[0] == OUTSIDE
+
+    shaved, rows = contractor.shave(boxes, rejected, local, q, rounds, max_per_call=max_boxes)
+    return Subpaving(paving.inner, shaved, coarse=paving.coarse), rejects[rows]
 
 
 def localize(
@@ -183,6 +228,7 @@ def localize(
     engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
+    contract: bool = True,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
@@ -199,6 +245,9 @@ def localize(
     call, so time and memory are bounded whatever the map, the readings or ``eps``; where the
     budget cuts the paving short or merges its boxes the set is a coarser cover of the same
     poses, marked ``coarse`` (:attr:`intervals.boxes.Subpaving.coarse`).
+    ``contract``: contract every SIVIA frontier by :mod:`intervals.sonar.contractor` before
+    the test (the same set or a tighter one: it only removes poses with more than ``q`` wrong
+    readings).
     """
     _checked_q(q)
     _checked_budget(max_boxes)
@@ -216,6 +265,7 @@ def localize(
         engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
+        _checked_contract(contract),
     )[0]
 
 
@@ -249,6 +299,7 @@ def gomne(
     engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
+    contract: bool = True,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -261,8 +312,8 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``engine``, ``ray_test`` and ``max_boxes``: as in :func:`localize` (a coarse ``S_qmax``
-    gives a coarse ``S_q``).
+    ``engine``, ``ray_test``, ``max_boxes`` and ``contract``: as in :func:`localize` (a coarse
+    ``S_qmax`` gives a coarse ``S_q``).
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
@@ -281,6 +332,7 @@ def gomne(
         engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
+        _checked_contract(contract),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None)
@@ -296,6 +348,7 @@ def gomne(
                 engine=engine,
                 ray_test=ray_test,
                 max_boxes=max_boxes,
+                contract=contract,
             )
             if not minimal.is_empty:
                 break

@@ -31,6 +31,11 @@ OUTSIDE, INSIDE, UNDECIDED = Verdict.OUTSIDE, Verdict.INSIDE, Verdict.UNDECIDED
 BoxTest = Callable[[np.ndarray], np.ndarray]
 """``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values."""
 
+Contractor = Callable[[np.ndarray], np.ndarray]
+"""``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row a box inside the input row holding
+every point of it that satisfies the constraints; a row with no such point is marked empty
+(NaN, or a lower bound above the upper)."""
+
 DEFAULT_MAX_BOXES = 200_000
 """Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
 
@@ -42,6 +47,15 @@ def _verdicts(test: BoxTest, boxes: np.ndarray) -> np.ndarray:
     if np.any((v < OUTSIDE) | (v > UNDECIDED)):
         raise IntervalError("SIVIA test returned a value other than OUTSIDE, INSIDE, UNDECIDED")
     return v
+
+
+def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
+    """``boxes`` contracted, the empty rows dropped, every row kept within its input row."""
+    c = np.asarray(contract(boxes), dtype=np.float64)
+    if c.shape != boxes.shape:
+        raise IntervalError(f"SIVIA contractor returned shape {c.shape}, expected {boxes.shape}")
+    c = np.stack([np.maximum(c[..., 0], boxes[..., 0]), np.minimum(c[..., 1], boxes[..., 1])], -1)
+    return c[np.all(c[..., 0] <= c[..., 1], axis=1)]  # NaN compares false: dropped too
 
 
 def _split(boxes: np.ndarray, eps: float, scale, times: int) -> np.ndarray:
@@ -73,6 +87,7 @@ def sivia(
     splits_per_level: int = 1,
     min_level_boxes: int = 1,
     max_tested: int | None = None,
+    contract: Contractor | None = None,
 ) -> Subpaving:
     """Pave ``initial`` (one box ``(d, 2)`` or a subpaving ``(N, d, 2)``) with ``test``.
 
@@ -94,6 +109,10 @@ def sivia(
     (possibly wider than ``eps``; each lies in a box the test left undecided, so the outer
     approximation still holds ``X``), and the subpaving is marked ``coarse``: a sound, coarser
     cover in bounded time, never an error.
+    ``contract``: a :data:`Contractor` applied to every frontier before the test (None: none);
+    the boxes it empties are dropped as OUTSIDE, the others tested (and bisected) as
+    contracted. Sound when the contractor is: it keeps every point that satisfies the
+    constraints, and the test sees only such boxes.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -134,6 +153,10 @@ def sivia(
         if boxes.shape[0] > max_boxes:  # equal chunks, the first on top
             pending.extend(np.array_split(boxes, -(-boxes.shape[0] // max_boxes))[::-1])
             continue
+        if contract is not None:
+            boxes = _contracted(contract, boxes)
+            if boxes.shape[0] == 0:
+                continue
         if max_tested is not None and tested + boxes.shape[0] > max_tested:
             boundary.extend([boxes, *pending])  # undecided, kept whole: a coarser cover
             coarse = True

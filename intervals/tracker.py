@@ -76,7 +76,7 @@ class EpochStatus(StrEnum):
 class TrackerSettings:
     """Settings of the interval tracker (validated at construction, bounds beside each field).
 
-    The scenario file's ``[estimation]`` table sets ``eps_m`` .. ``ray_test``; the robot's
+    The scenario file's ``[estimation]`` table sets ``eps_m`` .. ``contractor``; the robot's
     limits come from its ``[robot]`` table.
     """
 
@@ -114,6 +114,9 @@ class TrackerSettings:
     an epoch cut short keeps a coarser sound cover and is reported ``coarse``. The default keeps
     a test call within a few tens of MB and 600 epochs of sets at the cap within about 350 MB
     (57 bytes a stored box), under 1 GiB a run."""
+    contractor: bool = True
+    """Contract every SIVIA frontier by the sonar echoes before the box test
+    (:mod:`intervals.sonar.contractor`): the same poses kept, in fewer and smaller boxes."""
 
     def __post_init__(self) -> None:
         validate_fields(self, IntervalError)
@@ -245,6 +248,7 @@ class IntervalTracker:
             engine=s.engine,
             ray_test=s.ray_test,
             max_boxes=s.max_boxes,
+            contract=s.contractor,
         )
 
     def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:

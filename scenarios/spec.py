@@ -134,6 +134,7 @@ TRACKER_KEYS = (
     "imagesp_pitch_m",
     "ray_test",
     "max_boxes",
+    "contractor",
 )
 
 

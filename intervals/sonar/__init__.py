@@ -7,6 +7,8 @@
   :mod:`intervals.sonar.cone` (hit and free-space tests of the cone, kernel in
   :mod:`intervals.sonar.cone_kernel`), :mod:`intervals.sonar.room` (in-room test) and
   :mod:`intervals.sonar.rays` (the ray test, heading kept as one variable);
+* :mod:`intervals.sonar.contractor`: the contractor of pose boxes by the echoes (compiled),
+  applied before the tests, and the shaving of the boxes kept;
 * :mod:`intervals.sonar.engines`: the choice between compiled kernels and numpy references.
 
 Paving, q-relaxation and GOMNE on top of these tests are in :mod:`intervals.localize`.

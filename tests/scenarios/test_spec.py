@@ -254,6 +254,11 @@ BAD = {
         "estimation.ray_test",
         "true or false",
     ),
+    "estimation contractor": (
+        "[estimation]\ncontractor = 1\n",
+        "estimation.contractor",
+        "true or false",
+    ),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -334,6 +339,10 @@ def test_estimation_defaults_and_values():
     )
     assert est.scan_stride(4.0) == 4 and est.free_space is False and tracker.guaranteed is False
     assert tracker.ray_test is True and spec.estimation.intervals.ray_test is None  # by aperture
+    assert spec.estimation.intervals.contractor is True  # on by default
+    assert (
+        parse(BASE + "[estimation]\ncontractor = false\n").estimation.intervals.contractor is False
+    )
     assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
 

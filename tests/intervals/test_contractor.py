@@ -1,0 +1,241 @@
+"""The sonar contractor (intervals/sonar/contractor.py) against brute force, and its SIVIA hook.
+
+Soundness is checked with the simulator's own cone model (``tests.helpers.cone_ranges``) and
+the readings' error bounds stated independently of the interval code: a pose explains an echo
+``m`` when its exact cone distance ``d`` is at most ``d_max`` and ``|m - d| <= e_abs + e_rel
+d``. Every sampled pose of a box that explains all but at most ``q`` echoes must lie in the
+contracted box (no-echo readings are not counted: the contractor does not use them, so the
+poses to keep are a superset of those the pipeline keeps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+
+from intervals.boxes import volume
+from intervals.errors import IntervalError
+from intervals.localize import box_test, gomne, localize
+from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
+from intervals.sonar.contractor import contract, shave
+from intervals.sonar.scan import SonarBelt, SonarScan
+from robotsim.maps import builtin_map
+from tests.helpers import DEFAULT_BELT, boxes_around, cone_ranges, random_scan_case
+
+GAMMAS_RAD = (0.003, 0.05, np.deg2rad(12.5), 0.6)
+CORNERS = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+
+
+def _wrong_echoes(poses, scan: SonarScan, params) -> np.ndarray:
+    """``(..., )`` number of echoes the poses ``(..., 3)`` do not explain (module doc)."""
+    d = cone_ranges(poses, scan.segments, params)
+    m = scan.readings_m
+    with np.errstate(invalid="ignore"):  # inf - inf: no echo, not counted
+        gap = np.abs(m - d)
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
+    explained = (d <= params.d_max_m) & (gap <= bound)
+    return np.count_nonzero(np.isfinite(m) & ~explained, axis=-1)
+
+
+def _wrong_readings(poses, scan: SonarScan, params) -> np.ndarray:
+    """Readings the poses do not explain, no-echo readings included where they prove free
+    space (``echoes_never_lost``), and poses outside the room counted as explaining none."""
+    wrong = _wrong_echoes(poses, scan, params)
+    if scan.belt.echoes_never_lost:
+        d = cone_ranges(poses, scan.segments, params)
+        free = ~np.isfinite(scan.readings_m)
+        wrong = wrong + np.count_nonzero(free & (d <= params.d_max_m), axis=-1)
+    room = shapely.contains_xy(shapely.Polygon(scan.boundary), poses[..., 0], poses[..., 1])
+    return np.where(room, wrong, scan.belt.count + 1)
+
+
+def _with_outliers(scan: SonarScan, rng, count: int) -> SonarScan:
+    """The scan with ``count`` readings replaced by uniform values in ``[0, d_max]``."""
+    readings = scan.readings_m.copy()
+    which = rng.choice(readings.size, size=count, replace=False)
+    readings[which] = rng.uniform(0.0, scan.belt.d_max_m, count)
+    return SonarScan(scan.segments, scan.belt, readings, scan.boundary)
+
+
+def _sample(boxes, truth, rng, count):
+    """Poses ``(N, count + 8 + 16, 3)`` in each box: its corners, uniform draws and draws near
+    the truth (clipped to the box), where the consistent poses are."""
+    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
+    frac = np.concatenate([CORNERS, rng.uniform(0, 1, (count, 3))])
+    uniform = lo[:, None] + frac[None] * (hi - lo)[:, None]
+    uniform = np.clip(uniform, lo[:, None], hi[:, None])  # lo + (hi - lo) may round past hi
+    near = truth + rng.normal(0, 1, (boxes.shape[0], 16, 3)) * np.array([0.03, 0.03, 0.02])
+    near = np.clip(near, lo[:, None], hi[:, None])
+    return np.concatenate([uniform, near], axis=1)
+
+
+def _inside(poses, boxes):
+    """``(N, P)``: pose ``p`` of row ``n`` lies in box ``n`` (NaN boxes hold nothing)."""
+    return np.all((boxes[:, None, :, 0] <= poses) & (poses <= boxes[:, None, :, 1]), axis=-1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gamma", GAMMAS_RAD)
+def test_every_pose_with_at_most_q_wrong_echoes_stays_in_the_contracted_box(gamma):
+    """Random rooms, belts (default and random off-centre mounts), noise on the error bounds,
+    outliers, q in 0..2: boxes round the truth of all sizes, poses sampled in them."""
+    rng = np.random.default_rng(int(gamma * 1e6) + 7)
+    kept = 0
+    for case in range(30):
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        q = case % 3
+        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        boxes = boxes_around(truth, rng, 60)
+        out = contract(boxes, scan, q)
+        full = ~np.isnan(out).any(axis=(1, 2))
+        assert np.all(out[full, :, 0] >= boxes[full, :, 0])
+        assert np.all(out[full, :, 1] <= boxes[full, :, 1])
+        assert np.array_equal(out[full, 2], boxes[full, 2])  # the heading is left alone
+        poses = _sample(boxes, truth, rng, 40)
+        fits = _wrong_echoes(poses, scan, params) <= q
+        assert not np.any(fits & ~_inside(poses, out)), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+    assert kept > 1000  # the check saw many consistent poses
+
+
+def test_truth_kept_and_boxes_contracted_on_the_default_belt():
+    """Quick version of the brute force (the truth and poses near it), and the contractor is
+    no no-op: boxes of 0.2 to 1 m round the truth shrink to well under their area on average."""
+    rng = np.random.default_rng(3)
+    ratios = []
+    for _ in range(20):
+        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=False)
+        half = rng.uniform(0.1, 0.5, (40, 3)) * np.array([1.0, 1.0, 0.3])
+        offset = rng.uniform(-1, 1, (40, 3)) * half
+        boxes = np.stack([truth + offset - half, truth + offset + half], axis=-1)
+        out = contract(boxes, scan, 0)
+        assert _inside(truth[None, None].repeat(40, 0), out).all()
+        poses = _sample(boxes, truth, rng, 8)
+        fits = _wrong_echoes(poses, scan, params) == 0
+        assert not np.any(fits & ~_inside(poses, out))
+        area = np.prod(boxes[:, :2, 1] - boxes[:, :2, 0], axis=1)
+        ratios.append(np.prod(out[:, :2, 1] - out[:, :2, 0], axis=1) / area)
+    assert np.mean(ratios) < 0.7
+
+
+def test_impossible_reading_empties_and_no_echo_leaves_the_box():
+    """An echo whose interval is empty (no fault-free reading gives it) empties every box at
+    q = 0 and not at q = 1; a scan without echoes contracts nothing."""
+    segments = builtin_map("hall").segments
+    belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=False)
+    box = np.array([[[4.0, 5.0], [3.0, 4.0], [0.0, 0.2]]])
+    none = SonarScan(segments, belt, np.full(belt.count, np.inf))
+    assert np.array_equal(contract(box, none, 0), box)
+    readings = np.full(belt.count, np.inf)
+    readings[0] = DEFAULT_BELT.d_max_m + 0.5  # an echo beyond d_max: no fault-free sensor
+    scan = SonarScan(segments, belt, readings)
+    assert scan.ranges[0, 0] > scan.ranges[0, 1]  # the reading's interval is empty
+    assert np.isnan(contract(box, scan, 0)).all()
+    assert not np.isnan(contract(box, scan, 1)).any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gamma", GAMMAS_RAD[1:3])
+def test_shaving_keeps_every_consistent_pose_and_narrows_the_heading(gamma):
+    """Shaving with the box test (cone and room tests at q) against brute force: no sampled
+    pose explaining all but q readings leaves its box; the headings get narrower."""
+    rng = np.random.default_rng(int(gamma * 1e6) + 5)
+    kept, widths = 0, []
+    for case in range(16):
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        q = case % 2
+        scan = _with_outliers(scan, rng, q)
+        centre = truth + rng.normal(0, 1, (40, 3)) * np.array([0.03, 0.03, 0.02])
+        half = rng.uniform(0.01, 0.05, (40, 3))
+        boxes = np.stack([centre - half, centre + half], axis=-1)
+        local = scan.restricted_to(boxes)
+        shaved, rows = shave(
+            boxes, lambda b, s=local, r=q: box_test(b, s, r, inner=False) == OUTSIDE, local, q
+        )
+        assert np.all(shaved[:, :, 0] >= boxes[rows, :, 0])
+        assert np.all(shaved[:, :, 1] <= boxes[rows, :, 1])
+        poses = _sample(boxes, truth, rng, 40)
+        fits = _wrong_readings(poses, scan, params) <= q
+        placed = np.zeros(fits.shape, dtype=bool)
+        placed[rows] = _inside(poses[rows], shaved)
+        assert not np.any(fits & ~placed), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+        widths.append(np.mean(shaved[:, 2, 1] - shaved[:, 2, 0]) / np.mean(2 * half[rows, 2]))
+    assert kept > 50 and np.mean(widths) < 0.9
+
+
+def test_bad_arguments_raise_interval_error():
+    rng = np.random.default_rng(0)
+    scan, _, truth = random_scan_case(rng, 0.2, False)
+    box = np.stack([truth - 0.1, truth + 0.1], axis=-1)
+    for kwargs in ({"q": -1}, {"q": 1.5}, {"passes": 0}):
+        with pytest.raises(IntervalError):
+            contract(box, scan, **kwargs)
+    with pytest.raises(IntervalError, match="pose boxes"):
+        contract(box[:2], scan)
+    assert contract(np.zeros((0, 3, 2)), scan).shape == (0, 3, 2)
+
+
+def _disk_test(boxes):
+    """SIVIA test of the unit disk (exact interval bounds of x^2 + y^2)."""
+    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
+    near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
+    far = np.maximum(lo**2, hi**2).sum(axis=1)
+    return np.where(near > 1, OUTSIDE, np.where(far <= 1, INSIDE, UNDECIDED)).astype(np.int8)
+
+
+def test_sivia_drops_emptied_rows_clips_to_the_input_and_stays_sound():
+    """A contractor of the unit disk (its box [-1, 1]^2, NaN beyond it; one that also widens
+    its rows, which SIVIA must clip): fewer tests, and the disk's sampled points covered."""
+    seen = {"plain": 0, "contracted": 0}
+
+    def counting(name):
+        def test(boxes):
+            seen[name] += boxes.shape[0]
+            return _disk_test(boxes)
+
+        return test
+
+    def disk_box(boxes):
+        lo = np.maximum(boxes[:, :, 0], -1.0)
+        hi = np.minimum(boxes[:, :, 1], 1.0)
+        out = np.stack([lo - 0.5 * (lo > hi), hi + 0.5], axis=-1)  # widened: SIVIA clips
+        out[np.any(lo > hi, axis=1)] = np.nan
+        return out
+
+    initial = np.array([[-3.0, 2.0], [-1.5, 4.0]])
+    plain = sivia(counting("plain"), initial, 0.05)
+    contracted = sivia(counting("contracted"), initial, 0.05, contract=disk_box)
+    assert seen["contracted"] < seen["plain"]
+    outer = contracted.outer
+    assert np.all(outer[:, :, 0] >= initial[:, 0]) and np.all(outer[:, :, 1] <= initial[:, 1])
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-1, 1, (5000, 2))
+    points = points[np.hypot(*points.T) <= 1]
+    assert contracted.contains(points).all() and plain.contains(points).all()
+    assert volume(outer) <= volume(plain.outer) * 1.01
+    with pytest.raises(IntervalError, match="contractor returned shape"):
+        sivia(_disk_test, initial, 0.05, contract=lambda b: b[:1])
+
+
+@pytest.mark.slow
+def test_localize_and_gomne_with_the_contractor_keep_the_truth_in_smaller_sets():
+    """Default belt and a thin cone, random rooms: the paved set with the contractor holds the
+    truth whenever the set without it does (always here: no outliers), and is smaller on
+    average."""
+    rng = np.random.default_rng(11)
+    ratios = []
+    for case in range(12):
+        gamma = np.deg2rad(12.5) if case % 2 else 0.05
+        scan, _, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 3 == 0))
+        prior = np.stack([truth - [0.6, 0.6, 0.2], truth + [0.6, 0.6, 0.2]], axis=-1)
+        plain = localize(scan, prior, 0.05, q=1, contract=False)
+        tight = localize(scan, prior, 0.05, q=1)
+        assert plain.contains(truth[None])[0] and tight.contains(truth[None])[0]
+        found = gomne(scan, prior, 0.05, q_max=1)
+        assert found.consistent and found.paving.contains(truth[None])[0]
+        ratios.append(tight.volume() / plain.volume())
+    assert np.mean(ratios) < 1.0
+    with pytest.raises(IntervalError, match="contract must be"):
+        localize(scan, prior, 0.05, contract=1)  # type: ignore[arg-type]
