@@ -30,6 +30,7 @@ import numpy as np
 from robotsim.control import Plan, limit_command
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap
+from robotsim.obstacles import NO_OBSTACLES, Obstacles
 from robotsim.robot import RobotParams, body_velocity, wheel_rates, wrap_angle
 from robotsim.sensors.encoders import EncoderParams, ticks_from_slip, wheel_rotation_increments
 from robotsim.sensors.imu import (
@@ -41,7 +42,6 @@ from robotsim.sensors.imu import (
 )
 from robotsim.sensors.sonar import (
     SonarBeltParams,
-    cone_distances,
     readings_from_draws,
     sonar_draws,
 )
@@ -65,6 +65,47 @@ class KidnapEvent:
 
     t_s: float
     pose: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class SonarFailure:
+    """The sonars ``sensors`` (indices into the belt) fail at the scans taken from
+    ``start_s`` (included) to ``end_s`` (excluded): each returns ``reading_m`` (``inf``: no
+    echo, the default; a number: a reading stuck at that value)."""
+
+    start_s: float
+    end_s: float
+    sensors: tuple[int, ...]
+    reading_m: float = math.inf
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sensors", tuple(int(i) for i in self.sensors))
+        if not (math.isfinite(self.start_s) and self.start_s < self.end_s):
+            raise RobotsimError(
+                f"sonar failure: start_s must be finite and before end_s, got {self.start_s}, {self.end_s}"
+            )
+        if not self.sensors or min(self.sensors) < 0:
+            raise RobotsimError(f"sonar failure: sensors must be indices >= 0, got {self.sensors}")
+        if not (
+            self.reading_m == math.inf or (math.isfinite(self.reading_m) and self.reading_m >= 0)
+        ):
+            raise RobotsimError(
+                f"sonar failure: reading_m must be inf (no echo) or a range >= 0, got {self.reading_m}"
+            )
+
+
+def apply_failures(
+    readings_m: np.ndarray, fault: np.ndarray, scan_t_s: np.ndarray, failures
+) -> tuple[np.ndarray, np.ndarray]:
+    """The readings ``(M, k)`` and fault mask of the scans at ``scan_t_s (M,)`` with the
+    failed sensors' readings replaced (:class:`SonarFailure`; a failed reading is a fault)."""
+    readings_m, fault = readings_m.copy(), fault.copy()
+    for failure in failures:
+        rows = (scan_t_s >= failure.start_s) & (scan_t_s < failure.end_s)
+        cells = np.ix_(rows, np.array(failure.sensors))
+        readings_m[cells] = failure.reading_m
+        fault[cells] = True
+    return readings_m, fault
 
 
 class Observer(Protocol):
@@ -128,7 +169,10 @@ class SimulationLog:
         sonar_true_range_m (M, k) exact cone distances, no range limit (truth).
     kidnap_t_s (K,): the sample times at which the robot was kidnapped.
     wall_contact (N,) bool: pymunk resolved a contact between the robot and a wall during
-    the step that starts at the sample (the last sample, which no step follows, is False).
+    the step that starts at the sample (the last sample, which no step follows, is False);
+    obstacle_contact (N,) bool: the same for the unmapped obstacles.
+    Sonar faults include the readings of failed sensors (:class:`SonarFailure`), and the
+    true ranges are to the walls and the obstacles as they were at the scan.
     """
 
     t_s: np.ndarray
@@ -147,6 +191,7 @@ class SimulationLog:
     sonar_true_range_m: np.ndarray
     kidnap_t_s: np.ndarray
     wall_contact: np.ndarray
+    obstacle_contact: np.ndarray
     rate_hz: float
     robot: RobotParams
     sensors: SensorSuite
@@ -171,6 +216,8 @@ def simulate(
     kidnaps: tuple[KidnapEvent, ...] = (),
     progress: Callable[[float], None] | None = None,
     observer: Observer | None = None,
+    obstacles: Obstacles = NO_OBSTACLES,
+    sonar_failures: tuple[SonarFailure, ...] = (),
 ) -> SimulationLog:
     """Simulate ``duration_s`` seconds of the robot following ``plan`` in ``segment_map``.
 
@@ -186,25 +233,35 @@ def simulate(
             1 %), for a progress bar; the sensors after the loop take a small share.
         observer: None (the controller steers on the true pose), or the estimator the
             controller steers on (closed loop, module docstring).
+        obstacles: things in the world that ``segment_map`` lacks (``robotsim.obstacles``):
+            in the physics and in the sonar's view.
+        sonar_failures: windows in which some sonars return a failure value.
 
     Raises:
-        RobotsimError: a bad duration, or a start or kidnap pose that collides with a wall.
+        RobotsimError: a bad duration, a start or kidnap pose that collides with a wall or
+            an obstacle, a failure naming a sensor the belt lacks.
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise RobotsimError(f"duration_s must be positive and finite, got {duration_s}")
     rate_hz = world.step_hz
     count = round(duration_s * rate_hz) + 1
-    sim_world = World(segment_map, robot, start_pose, world)
+    sim_world = World(segment_map, robot, start_pose, world, obstacles)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
     belt = sensors.sonar
+    for failure in sonar_failures:
+        if max(failure.sensors) >= belt.count:
+            raise RobotsimError(
+                f"sonar failure: sensor {max(failure.sensors)} is not on the belt of {belt.count}"
+            )
+    sonar = _SonarWorld(segment_map, obstacles, belt, tuple(sonar_failures))
     scans = np.unique(np.round(np.arange(0.0, duration_s + 1e-9, 1.0 / belt.rate_hz) * rate_hz))
     scans = scans[scans < count].astype(np.int64)
     noise = SensorNoise.draw(count, len(scans), sensors, rate_hz, rng)
     stream = None
     if observer is not None:
-        stream = _SensorStream(noise, scans, segment_map, robot, sensors, rate_hz, count, schedule)
+        stream = _SensorStream(noise, scans, sonar, robot, sensors, rate_hz, count, schedule)
 
-    states, commands, contact = _run_physics(
+    states, commands, contact, obstacle_contact = _run_physics(
         sim_world, plan.controller(robot), robot, count, schedule, progress, stream, observer
     )
     t_s = np.arange(count) / rate_hz
@@ -221,14 +278,7 @@ def simulate(
     accel = specific_force(velocity, rate_hz) + noise.accel_bias + noise.accel_white
     gyro_bias, accel_bias = noise.gyro_bias, noise.accel_bias
 
-    true_range = cone_distances(
-        pose[scans],
-        segment_map.segments,
-        belt.mount_xy,
-        belt.mount_angle_rad,
-        belt.half_aperture_rad,
-    )
-    readings, fault = readings_from_draws(true_range, belt, noise.sonar)
+    true_range, readings, fault = sonar.scans(pose[scans], t_s[scans], noise.sonar)
 
     return SimulationLog(
         t_s=t_s,
@@ -247,6 +297,7 @@ def simulate(
         sonar_true_range_m=true_range,
         kidnap_t_s=t_s[kidnapped],
         wall_contact=contact,
+        obstacle_contact=obstacle_contact,
         rate_hz=rate_hz,
         robot=robot,
         sensors=sensors,
@@ -265,8 +316,40 @@ def _kidnap_schedule(
             raise RobotsimError(
                 f"kidnap time {event.t_s} s is outside the run (0, {(count - 1) / rate_hz}] s"
             )
-        schedule[index] = sim_world.check_free(event.pose)
+        schedule[index] = sim_world.check_free(event.pose, t_s=index / rate_hz)
     return schedule
+
+
+class _SonarWorld:
+    """What the sonar belt sees: the map's walls and the obstacles at the scan's time, then
+    the error model and the failures (the same arithmetic for a block of scans or one)."""
+
+    def __init__(
+        self,
+        segment_map: SegmentMap,
+        obstacles: Obstacles,
+        belt: SonarBeltParams,
+        failures: tuple[SonarFailure, ...],
+    ) -> None:
+        self.segments, self.obstacles, self.belt, self.failures = (
+            segment_map.segments,
+            obstacles,
+            belt,
+            failures,
+        )
+
+    def scans(
+        self, poses: np.ndarray, t_s: np.ndarray, draws: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """True ranges, readings and fault mask ``(M, k)`` of the scans at ``poses (M, 3)``,
+        times ``t_s (M,)``, from the sonar draws of those scans."""
+        belt = self.belt
+        true_range = self.obstacles.cone_distances(
+            poses, t_s, self.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+        )
+        readings, fault = readings_from_draws(true_range, belt, draws)
+        readings, fault = apply_failures(readings, fault, t_s, self.failures)
+        return true_range, readings, fault
 
 
 #: Number of progress reports over a run's physics loop.
@@ -284,10 +367,12 @@ def _run_physics(
     observer: Observer | None = None,
 ):
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
-    the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
+    the wanted commands ``(count, 2)`` and the wall- and obstacle-contact flags ``(count,)``
+    bool.
 
-    Contacts come from :meth:`World.on_wall_contact` (pymunk's solver): its callback sets a
-    flag that the loop reads and clears after each step. With an ``observer``, ``stream``
+    Contacts come from :meth:`World.on_wall_contact` and :meth:`World.on_obstacle_contact`
+    (pymunk's solver): their callbacks set flags that the loop reads and clears after each
+    step. With an ``observer``, ``stream``
     gives it each sample once the next state is known, and the controller steers on the
     observer's pose.
     """
@@ -301,13 +386,18 @@ def _run_physics(
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
     states: list[tuple[float, float, float, float, float]] = []
     commands: list[tuple[float, float]] = []
-    touched = [False]
+    touched = [False, False]  # a wall, an obstacle during this step
 
-    def note_contact() -> None:
+    def note_wall() -> None:
         touched[0] = True
 
-    sim_world.on_wall_contact(note_contact)
+    def note_obstacle() -> None:
+        touched[1] = True
+
+    sim_world.on_wall_contact(note_wall)
+    sim_world.on_obstacle_contact(note_obstacle)
     contact = np.zeros(count, dtype=bool)
+    obstacle_contact = np.zeros(count, dtype=bool)
     report_every = max(1, count // PROGRESS_REPORTS)
     target = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
@@ -343,10 +433,13 @@ def _run_physics(
         if touched[0]:
             contact[k] = True
             touched[0] = False
+        if touched[1]:
+            obstacle_contact[k] = True
+            touched[1] = False
     if progress is not None:
         progress(1.0)
     commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
-    return np.array(states), np.array(commands, dtype=np.float64), contact
+    return np.array(states), np.array(commands, dtype=np.float64), contact, obstacle_contact
 
 
 class _SensorStream:
@@ -357,7 +450,7 @@ class _SensorStream:
         self,
         noise: SensorNoise,
         scans: np.ndarray,
-        segment_map: SegmentMap,
+        sonar: _SonarWorld,
         robot: RobotParams,
         sensors: SensorSuite,
         rate_hz: float,
@@ -365,7 +458,7 @@ class _SensorStream:
         schedule: dict[int, np.ndarray],
     ) -> None:
         self.noise, self.robot, self.sensors = noise, robot, sensors
-        self.segments = segment_map.segments
+        self.sonar = sonar
         self.scan_of = {int(sample): m for m, sample in enumerate(scans)}
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.turned = np.zeros(2)  # cumulative wheel turns with slip, rad
@@ -403,9 +496,6 @@ class _SensorStream:
         if scan is not None:
             x, y, theta = states[j][:3]
             pose = np.array([[x, y, wrap_angle(theta)]])
-            belt = self.sensors.sonar
-            true_range = cone_distances(
-                pose, self.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
-            )
             draws = tuple(draw[scan : scan + 1] for draw in noise.sonar)
-            observer.scan(t_s, readings_from_draws(true_range, belt, draws)[0][0])
+            _, readings, _ = self.sonar.scans(pose, np.array([t_s]), draws)
+            observer.scan(t_s, readings[0])

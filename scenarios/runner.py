@@ -161,4 +161,6 @@ def simulate_spec(
         kidnaps=kidnaps,
         progress=progress,
         observer=observer,
+        obstacles=spec.obstacles,
+        sonar_failures=spec.sonar_failures,
     )

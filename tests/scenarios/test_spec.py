@@ -49,7 +49,8 @@ def test_every_builtin_scenario_parses_and_uses_its_map():
         spec = load_scenario(name)
         assert spec.name == name
         assert spec.description and "\n" not in spec.description
-        assert spec.map.name == name
+        # the furnished plans with unmapped obstacles use the plan of their name's first word
+        assert spec.map.name == (name.split("_")[0] if spec.obstacles else name)
         assert isinstance(spec.plan, (Route, ScriptedProfile)) and spec.plan is not STAND_STILL
         assert spec.run.duration_s > 0
 
