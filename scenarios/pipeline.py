@@ -67,6 +67,7 @@ __all__ = [
     "estimation_summary",
     "gathered",
     "localizer_for",
+    "recovery_s",
     "scan_samples",
 ]
 
@@ -405,9 +406,9 @@ RECOVERY_HOLD_S = 10.0
 
 
 def recovery_s(log: SensorData, estimation: Estimation, t_s: float) -> float | None:
-    """Seconds from ``t_s`` (a kidnapping) to the first sample from which the fused
-    position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
-    :data:`RECOVERY_HOLD_S` (None: not within the run)."""
+    """Seconds from ``t_s`` (a kidnapping, the onset of a fault) to the first sample from
+    which the fused position stays within :data:`RECOVERY_DISTANCE_M` of the truth for
+    :data:`RECOVERY_HOLD_S` (None: not within the run; 0: it never left)."""
     start = int(np.searchsorted(log.t_s, t_s - 0.5 / log.rate_hz))
     hold = round(RECOVERY_HOLD_S * log.rate_hz)
     error = np.linalg.norm(estimation.pose[FUSED, :, :2] - log.pose[:, :2], axis=1)

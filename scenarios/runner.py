@@ -24,7 +24,7 @@ from intervals.errors import IntervalBudgetError
 from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLog, simulate
 from robotsim.world import WorldParams
 from scenarios.errors import ScenarioError
-from scenarios.metrics import route_stats, summarize
+from scenarios.metrics import route_stats, safety_stats, summarize
 from scenarios.pipeline import (
     BRANCHES,
     FUSED,
@@ -36,6 +36,7 @@ from scenarios.pipeline import (
     estimation_summary,
     gathered,
     localizer_for,
+    recovery_s,
 )
 from scenarios.spec import Follow, ScenarioSpec
 
@@ -130,6 +131,16 @@ def run_scenario(
     summary = summarize(spec, log)
     summary.update(estimation_summary(log, estimation))
     summary["route"] = route_stats(spec, log)
+    summary["safety"] = safety_stats(spec, log, estimation.epochs, estimation.epoch_index)
+    summary["sonar_failures"] = [
+        {
+            "start_s": failure.start_s,
+            "end_s": failure.end_s,
+            "sensors": list(failure.sensors),
+            "recovery_s": recovery_s(log, estimation, failure.start_s),
+        }
+        for failure in spec.sonar_failures
+    ]
     return RunResult(
         log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s
     )
