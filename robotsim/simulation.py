@@ -6,11 +6,12 @@ generators of the run's ``Generator`` (one child per sensor, so switching one se
 faults on leaves the other sensors' draws unchanged).
 
 Closed loop (an :class:`Observer`: the robot's estimator): the noise does not depend on the
-motion, so it is drawn before the loop; at each step the loop computes the previous
-sample's readings from it (the same arithmetic as the vectorised pass, which still writes
-the log), hands them to the observer and steers on the pose the observer gives back. The
-controller thus sees the estimate one sample late (the accelerometer's central difference
-at a sample needs the next one), a 10 ms latency at 100 Hz.
+motion, so it is drawn before the loop; at each control tick (every ``control_stride``
+steps) the loop computes the readings of the samples since the last tick from it (the
+same arithmetic as the vectorised pass, which still writes the log), hands them to the
+observer and steers on the pose the observer gives back, the command held until the next
+tick. The controller thus sees the estimate one sample late (the accelerometer's central
+difference at a sample needs the next one), a 10 ms latency at 100 Hz.
 
 Commands: the controller asks for a body velocity; the robot's software turns it into
 wheel rates with the NOMINAL radius, and the wheels move the body with the TRUE radii
@@ -112,8 +113,9 @@ class Observer(Protocol):
     """The robot's estimator in a closed loop: fed every sample as the robot gets it, asked
     for the pose the controller steers on."""
 
-    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
-        """Sample at ``t_s``: tick increments ``(2,)`` int64, yaw rate, specific force ``(2,)``."""
+    def odometry_block(self, t_s, ticks, gyro_rad_s, accel_m_s2) -> None:
+        """Consecutive samples at ``t_s (n,)``: tick increments ``(n, 2)`` int64, yaw rates
+        ``(n,)``, specific forces ``(n, 2)``."""
 
     def scan(self, t_s: float, readings_m) -> None:
         """The sonar scan ``(k,)`` taken at ``t_s`` (after that sample's odometry)."""
@@ -218,6 +220,7 @@ def simulate(
     observer: Observer | None = None,
     obstacles: Obstacles = NO_OBSTACLES,
     sonar_failures: tuple[SonarFailure, ...] = (),
+    control_stride: int = 1,
 ) -> SimulationLog:
     """Simulate ``duration_s`` seconds of the robot following ``plan`` in ``segment_map``.
 
@@ -236,6 +239,8 @@ def simulate(
         obstacles: things in the world that ``segment_map`` lacks (``robotsim.obstacles``):
             in the physics and in the sonar's view.
         sonar_failures: windows in which some sonars return a failure value.
+        control_stride: with an ``observer``, the steps from one control tick to the next
+            (the controller's period in samples; without an observer it runs every step).
 
     Raises:
         RobotsimError: a bad duration, a start or kidnap pose that collides with a wall or
@@ -261,8 +266,18 @@ def simulate(
     if observer is not None:
         stream = _SensorStream(noise, scans, sonar, robot, sensors, rate_hz, count, schedule)
 
+    if int(control_stride) != control_stride or control_stride < 1:
+        raise RobotsimError(f"control_stride must be an integer >= 1, got {control_stride}")
     states, commands, contact, obstacle_contact = _run_physics(
-        sim_world, plan.controller(robot), robot, count, schedule, progress, stream, observer
+        sim_world,
+        plan.controller(robot),
+        robot,
+        count,
+        schedule,
+        progress,
+        stream,
+        observer,
+        int(control_stride),
     )
     t_s = np.arange(count) / rate_hz
     pose = np.column_stack([states[:, :2], wrap_angle(states[:, 2])])
@@ -365,6 +380,7 @@ def _run_physics(
     progress=None,
     stream: _SensorStream | None = None,
     observer: Observer | None = None,
+    control_stride: int = 1,
 ):
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
     the wanted commands ``(count, 2)`` and the wall- and obstacle-contact flags ``(count,)``
@@ -372,9 +388,9 @@ def _run_physics(
 
     Contacts come from :meth:`World.on_wall_contact` and :meth:`World.on_obstacle_contact`
     (pymunk's solver): their callbacks set flags that the loop reads and clears after each
-    step. With an ``observer``, ``stream``
-    gives it each sample once the next state is known, and the controller steers on the
-    observer's pose.
+    step. With an ``observer``, the controller runs every ``control_stride`` steps (its
+    command held in between): at each such step ``stream`` gives the observer the samples
+    whose next state is known, and the controller steers on the observer's pose.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -399,7 +415,7 @@ def _run_physics(
     contact = np.zeros(count, dtype=bool)
     obstacle_contact = np.zeros(count, dtype=bool)
     report_every = max(1, count // PROGRESS_REPORTS)
-    target = (0.0, 0.0)
+    target = wanted = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
     for k in range(count):
         if progress is not None and k % report_every == 0:
@@ -409,17 +425,18 @@ def _run_physics(
         now = state()
         states.append(now)
         if stream is not None and observer is not None:
-            if k >= 1:
-                stream.emit(k - 1, states, observer)
             if k == count - 1:
-                stream.emit(k, states, observer)
+                stream.emit(k + 1, states, observer)
                 break
-            x, y, theta = observer.pose()
+            if k % control_stride == 0:  # a control tick: the samples so far, then the pose
+                stream.emit(k, states, observer)
+                x, y, theta = observer.pose()
+                wanted = command(k * dt_s, x, y, theta)
         elif k == count - 1:
             break
         else:
             x, y, theta, _, _ = now
-        wanted = command(k * dt_s, x, y, theta)
+            wanted = command(k * dt_s, x, y, theta)
         commands.append(wanted)
         wanted_v, wanted_omega = wanted
         target = limit_command(
@@ -443,8 +460,10 @@ def _run_physics(
 
 
 class _SensorStream:
-    """The readings of one sample from the drawn noise and the states so far: the arithmetic
-    of the vectorised pass of :func:`simulate`, element by element, in sample order."""
+    """The readings of the samples so far from the drawn noise and the states: the
+    arithmetic of the vectorised pass of :func:`simulate` on a window of rows, in sample
+    order (each row's value is the one the whole-run pass computes: element-wise formulas,
+    the central difference over the row's neighbours, the cumulative turn continued)."""
 
     def __init__(
         self,
@@ -459,43 +478,55 @@ class _SensorStream:
     ) -> None:
         self.noise, self.robot, self.sensors = noise, robot, sensors
         self.sonar = sonar
-        self.scan_of = {int(sample): m for m, sample in enumerate(scans)}
+        self.scans = scans
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
-        self.turned = np.zeros(2)  # cumulative wheel turns with slip, rad
-        self.counted = np.zeros(2)  # ticks counted so far
+        self.done = 0  # samples handed over so far
+        self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
+        self.counted = np.zeros((1, 2))  # ticks counted so far
 
-    def emit(self, j: int, states: list, observer: Observer) -> None:
-        """Hand sample ``j`` (and its scan, if any) to ``observer``; ``states`` holds rows
-        ``0..j+1`` (or ``0..j`` for the last sample)."""
+    def emit(self, stop: int, states: list, observer: Observer) -> None:
+        """Hand samples ``done .. stop - 1`` (and their scans) to ``observer``; ``states``
+        holds rows ``0..stop`` (``0..stop - 1`` when ``stop`` is the sample count)."""
+        start = self.done
+        if stop <= start:
+            return
         robot, noise, rate_hz = self.robot, self.noise, self.rate_hz
-        if j == 0:
-            rotation = np.zeros(2)
-        elif j in self.schedule:
-            rotation = wheel_rates(states[j - 1][3:5], robot.true_radii_m, robot.wheel_base_m)
-            rotation = rotation / rate_hz
-        else:
-            window = np.array([states[j - 1][:3], states[j][:3]])
-            rotation = wheel_rotation_increments(window, robot)[1]
-        self.turned = self.turned + rotation * (
-            1.0 + self.sensors.encoders.slip_std * noise.slip[j]
-        )
-        counted = np.floor(self.turned * (robot.ticks_per_rev / (2.0 * np.pi)))
-        ticks = (counted - self.counted).astype(np.int64)
-        self.counted = counted
-        v, omega = states[j][3], states[j][4]
-        gyro = omega + noise.gyro_bias[j] + noise.gyro_white[j]
-        low, high = max(j - 1, 0), min(j + 1, self.count - 1)
-        window_v = np.array([states[i][3] for i in range(low, high + 1)])
-        force = specific_force(np.column_stack([window_v, np.zeros_like(window_v)]), rate_hz)
-        accel = (
-            np.array([force[j - low, 0], v * omega]) + noise.accel_bias[j] + noise.accel_white[j]
-        )
-        t_s = j / rate_hz
-        observer.odometry(t_s, ticks, gyro, accel)
-        scan = self.scan_of.get(j)
-        if scan is not None:
-            x, y, theta = states[j][:3]
-            pose = np.array([[x, y, wrap_angle(theta)]])
-            draws = tuple(draw[scan : scan + 1] for draw in noise.sonar)
-            _, readings, _ = self.sonar.scans(pose, np.array([t_s]), draws)
-            observer.scan(t_s, readings[0])
+        low, high = max(start - 1, 0), min(stop + 1, self.count)  # rows for the differences
+        window = np.array(states[low:high])
+        rotation = wheel_rotation_increments(window[:, :3], robot)[start - low : stop - low]
+        for j in self.schedule:  # the jump is not odometry: the wheels turned as the robot drove
+            if start <= j < stop:
+                before = window[j - 1 - low, 3:5]
+                rotation[j - start] = (
+                    wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
+                )
+        turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
+        total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
+        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))
+        ticks = np.diff(np.concatenate([self.counted, counted[1:]]), axis=0).astype(np.int64)
+        self.turned, self.counted = total[-1:], counted[-1:]
+        velocity = window[:, 3:5]
+        rows = slice(start - low, stop - low)
+        gyro = velocity[rows, 1] + noise.gyro_bias[start:stop] + noise.gyro_white[start:stop]
+        force = specific_force(velocity, rate_hz)[rows]
+        accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
+        t_s = np.arange(start, stop) / rate_hz
+        in_block = self.scans[(self.scans >= start) & (self.scans < stop)]
+        readings = np.zeros((0, self.sensors.sonar.count))
+        if in_block.size:
+            m = np.searchsorted(self.scans, in_block)
+            pose = window[in_block - low, :3].copy()
+            pose[:, 2] = wrap_angle(pose[:, 2])
+            draws = tuple(draw[m] for draw in noise.sonar)
+            _, readings, _ = self.sonar.scans(pose, in_block / rate_hz, draws)
+        begin = 0
+        for scan, sample in enumerate(in_block.tolist()):  # each scan after its sample
+            end = sample - start + 1
+            observer.odometry_block(
+                t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
+            )
+            observer.scan(float(t_s[end - 1]), readings[scan])
+            begin = end
+        if begin < stop - start:
+            observer.odometry_block(t_s[begin:], ticks[begin:], gyro[begin:], accel[begin:])
+        self.done = stop

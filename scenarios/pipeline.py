@@ -203,8 +203,8 @@ class Steering:
     def __init__(self, localizer: OnlineLocalizer, branch: int) -> None:
         self.localizer, self.branch = localizer, branch
 
-    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
-        self.localizer.push_odometry(t_s, ticks, gyro_rad_s, accel_m_s2)
+    def odometry_block(self, t_s, ticks, gyro_rad_s, accel_m_s2) -> None:
+        self.localizer.push_odometry_block(t_s, ticks, gyro_rad_s, accel_m_s2)
 
     def scan(self, t_s: float, readings_m) -> None:
         self.localizer.push_scan(t_s, readings_m)

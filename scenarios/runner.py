@@ -174,4 +174,5 @@ def simulate_spec(
         observer=observer,
         obstacles=spec.obstacles,
         sonar_failures=spec.sonar_failures,
+        control_stride=spec.control_stride,
     )

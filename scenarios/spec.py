@@ -34,7 +34,10 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
     sample; a faster or off-beat sonar is refused rather than silently slowed).
     ``safety_margin_m`` (0.1): the clearance from the walls the summary checks the robot and
-    its interval sets against (``scenarios.metrics.safety_stats``).
+    its interval sets against (``scenarios.metrics.safety_stats``). ``control_rate_hz``
+    (10.0, dividing ``run.rate_hz`` a whole number of times): in a closed loop, how often
+    the controller is given the estimate and recomputes its command (held in between);
+    steering on the truth it runs at every sample.
 ``[world]``
     What the world holds that the map lacks: ``[[world.obstacles]]``, each exactly one of
     ``polygon_m`` (``[[x, y], ...]``, at least 3 vertices, a simple polygon of non-zero
@@ -183,6 +186,11 @@ class EventKind(StrEnum):
 DEFAULT_SAFETY_MARGIN_M = 0.1
 SAFETY_MARGIN_BOUNDS = Bounds(minimum=0.0, maximum=10.0)
 
+#: ``[route] control_rate_hz``: the closed loop's control rate, Hz (a robot's navigation
+#: loop runs at 10 to 20 Hz over its 100 Hz odometry), and its bounds.
+DEFAULT_CONTROL_RATE_HZ = 10.0
+CONTROL_RATE_BOUNDS = Bounds(above=0.0, maximum=MAX_RATE_HZ)
+
 
 # ---------------------------------------------------------------------------------------
 # The spec: a frozen tree
@@ -326,6 +334,15 @@ class ScenarioSpec:
     """The ``sonar_failure`` events, in time order."""
     safety_margin_m: float = DEFAULT_SAFETY_MARGIN_M
     """``[route] safety_margin_m``: the clearance from the walls the summary checks, m."""
+    control_rate_hz: float = DEFAULT_CONTROL_RATE_HZ
+    """``[route] control_rate_hz``: the closed loop's control rate, Hz."""
+
+    @property
+    def control_stride(self) -> int:
+        """Samples from one control tick of the closed loop to the next (1 steering on the truth)."""
+        if self.follow == Follow.TRUTH:
+            return 1
+        return round(self.run.rate_hz / self.control_rate_hz)
 
     @property
     def injected_faults(self) -> tuple[str, ...]:
@@ -452,6 +469,16 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     safety_margin_m = route_table.take_float(
         "safety_margin_m", DEFAULT_SAFETY_MARGIN_M, bounds=SAFETY_MARGIN_BOUNDS
     )
+    control_rate_hz = route_table.take_float(
+        "control_rate_hz", DEFAULT_CONTROL_RATE_HZ, bounds=CONTROL_RATE_BOUNDS
+    )
+    ratio = run.rate_hz / control_rate_hz
+    if ratio < 1.0 - RATE_RATIO_TOL or abs(ratio - round(ratio)) > RATE_RATIO_TOL:
+        raise route_table.error(
+            "control_rate_hz",
+            f"must divide the simulation rate (run.rate_hz = {run.rate_hz:g} Hz) a whole number "
+            f"of times, got {control_rate_hz:g}",
+        )
     plan = _read_route(route_table, segment_map, robot)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar, follow)
@@ -475,6 +502,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         obstacles=obstacles,
         sonar_failures=failures,
         safety_margin_m=safety_margin_m,
+        control_rate_hz=control_rate_hz,
     )
 
 
