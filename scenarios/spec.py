@@ -23,9 +23,10 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     Either ``waypoints_m`` (an array of ``[x, y]``, followed by pure pursuit; the other keys
     are the fields of ``robotsim.control.Route``) or ``[[route.profile]]`` steps
     ``{duration_s, v_m_s, omega_rad_s | omega_deg_s}`` played in order, then a stop. Without
-    a route the robot stands still. ``follow`` (:class:`Follow`, ``"truth"``): the pose the
-    pure pursuit steers on, the true one or, closed loop, the estimate of a localisation
-    branch (waypoints only: a profile ignores the pose).
+    a route the robot stands still. ``follow`` (:class:`Follow`; :func:`default_follow`:
+    ``"estimate"`` for waypoints): the pose the pure pursuit steers on, the true one or,
+    closed loop, the estimate of a localisation branch (waypoints only: a profile ignores
+    the pose).
 ``[sensors.encoders]``, ``[sensors.gyro]``, ``[sensors.accelerometer]``, ``[sensors.sonar]``
     The fields of the simulator's sensor parameter classes; for the sonar also ``count``
     (an even belt on the robot's rim, the default) in place of ``mount_xy`` and
@@ -161,6 +162,14 @@ class Follow(StrEnum):
     """Closed loop on the fused branch (dead reckoning fused with the interval sets)."""
     UKF_ONLY = "ukf_only"
     """Closed loop on the UKF-only branch (dead reckoning alone: it drifts)."""
+
+
+def default_follow(plan: Plan) -> Follow:
+    """The ``[route] follow`` a scenario file gets when it does not say: the closed loop on
+    the fused estimate for waypoints (``benchmarks/closed_loop.py``: on hall, office and the
+    apartment, every seed completes its route with containment 1), the truth for a scripted
+    profile or no route (nothing steers on a pose)."""
+    return Follow.ESTIMATE if isinstance(plan, Route) else Follow.TRUTH
 
 
 def default_fusion(follow: Follow) -> FusionRule:
@@ -465,7 +474,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     _check_start(robot_table, segment_map, start_pose, robot)
     obstacles = _read_world(top.take_table("world"), segment_map, start_pose, robot)
     route_table = top.take_table("route")
-    follow = Follow(route_table.take_str("follow", str(Follow.TRUTH), choices=choices(Follow)))
+    given_follow = route_table.take_str("follow", None, choices=choices(Follow))
     safety_margin_m = route_table.take_float(
         "safety_margin_m", DEFAULT_SAFETY_MARGIN_M, bounds=SAFETY_MARGIN_BOUNDS
     )
@@ -480,6 +489,7 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
             f"of times, got {control_rate_hz:g}",
         )
     plan = _read_route(route_table, segment_map, robot)
+    follow = default_follow(plan) if given_follow is None else Follow(given_follow)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar, follow)
     kidnaps, failures = _read_events(
