@@ -12,21 +12,34 @@ per scenario and ``follow``: the runs whose interval sets always held the truth
 (containment 1), the runs that did at least one lap of the route without touching a wall,
 the median and worst path-following error (the true position's distance to the route's
 polyline, m), the median laps, the wall contacts (pymunk contact steps, summed) and the
-median fused and UKF-only position RMSE. Not a timing benchmark: every figure is
-deterministic (same scenario and seed, same line).
+median fused and UKF-only position RMSE. Every figure of the sweep is deterministic (same
+scenario and seed, same line).
+
+    python benchmarks/closed_loop.py --timing [--scenarios hall] [--duration 600] [--repeat 3]
+
+times instead, interleaved round by round on the first scenario, seed 0, the whole run
+(simulation, estimation, summary; no recording) three ways: steered on the truth with the
+online localiser fed the finished log (``follow = "truth"``), the same with the batch
+pipeline on the finished arrays (``scenarios.pipeline.estimate_offline``), and the closed
+loop (``follow = "estimate"``: the simulator and the localiser stepped together). Prints the
+median wall time and real-time factor of each, and the ratios to the first.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from scenarios.runner import run_scenario
+from scenarios.metrics import summarize
+from scenarios.pipeline import estimate_offline, estimation_summary
+from scenarios.runner import run_scenario, simulate_spec
 from scenarios.spec import BUILTIN_FOLDER, Follow, scenario_from_tables
 from validated_records import choices
 
@@ -86,6 +99,43 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def offline_run(spec) -> None:
+    """The open-loop run with the batch pipeline: simulate, estimate on the arrays, summarise."""
+    log = simulate_spec(spec)
+    estimation, _ = estimate_offline(spec, log)
+    summarize(spec, log).update(estimation_summary(log, estimation))
+
+
+def timing(name: str, duration_s: float, repeat: int) -> str:
+    """The three ways of running ``name`` timed round by round (module docstring)."""
+    ways = {
+        "open loop, online localiser (follow = truth)": lambda: run_scenario(
+            spec_for(name, "truth", 0, duration_s)
+        ),
+        "open loop, batch pipeline": lambda: offline_run(spec_for(name, "truth", 0, duration_s)),
+        "closed loop (follow = estimate)": lambda: run_scenario(
+            spec_for(name, "estimate", 0, duration_s)
+        ),
+    }
+    walls: dict[str, list[float]] = {way: [] for way in ways}
+    for _ in range(max(1, repeat)):
+        for way, run in ways.items():
+            start = time.perf_counter()
+            run()
+            walls[way].append(time.perf_counter() - start)
+    first = float(np.median(next(iter(walls.values()))))
+    lines = [
+        f"{name}, {duration_s:g} s, seed 0; median of {repeat} interleaved rounds; "
+        f"load average {os.getloadavg()[0]:.1f} at the end",
+        "| run | wall (s) | real-time factor | wall / open loop online |",
+        "|---|---|---|---|",
+    ]
+    for way, seconds in walls.items():
+        wall = float(np.median(seconds))
+        lines.append(f"| {way} | {wall:.2f} | {duration_s / wall:.0f}x | {wall / first:.2f} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", nargs="+", default=["hall", "office", "apartment"])
@@ -100,7 +150,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--duration", type=float, default=600.0, help="simulated seconds")
     parser.add_argument("--out", type=Path, default=Path("runs/closed_loop.jsonl"))
+    parser.add_argument("--timing", action="store_true", help="time the loops instead")
+    parser.add_argument("--repeat", type=int, default=3, help="rounds of --timing")
     args = parser.parse_args(argv)
+    if args.timing:
+        print(timing(args.scenarios[0], args.duration, args.repeat))
+        return 0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows = []
     with args.out.open("w", encoding="utf-8") as out:

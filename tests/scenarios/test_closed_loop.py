@@ -85,6 +85,23 @@ def test_steering_on_the_fused_estimate_keeps_the_guarantee_and_the_route(name, 
     assert route["path_error_m"]["max"] < 0.5
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_steering_on_the_ukf_only_branch_drifts_off_the_route_on_a_long_run(seed):
+    # five minutes of hall: the dead reckoning alone drifts by decimetres, the fused branch
+    # stays within centimetres; a robot steered on each follows its route as well as that
+    fused = run_scenario(closed("hall", Follow.ESTIMATE, seed, duration_s=300.0)).summary
+    alone = run_scenario(closed("hall", Follow.UKF_ONLY, seed, duration_s=300.0)).summary
+    assert fused["containment"] == 1.0 and fused["walls"]["pymunk_contact_steps"] == 0
+    assert fused["route"]["path_error_m"]["max"] < 0.3
+    assert alone["route"]["follow"] == "ukf_only"
+    assert alone["route"]["path_error_m"]["max"] > 2.0 * fused["route"]["path_error_m"]["max"]
+    assert alone["route"]["path_error_m"]["mean"] > 3.0 * fused["route"]["path_error_m"]["mean"]
+    assert alone["rmse_position_m"]["ukf_only"] > 5.0 * fused["rmse_position_m"]["fused"]
+    # the steering branch's error is the path's: the sets still hold the truth
+    assert alone["containment"] == 1.0
+
+
 def test_route_stats_against_a_direct_computation():
     spec = closed("hall", Follow.TRUTH, duration_s=40.0)
     log = simulate_spec(spec)
