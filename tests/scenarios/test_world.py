@@ -9,6 +9,7 @@ import pytest
 
 from robotsim.maps import point_segment_distance
 from robotsim.sensors.sonar import cone_distances
+from scenarios.commands import guarantee_failure
 from scenarios.errors import ScenarioError
 from scenarios.pipeline import FUSED, RECOVERY_DISTANCE_M, RECOVERY_HOLD_S, localizer_for
 from scenarios.runner import run_scenario
@@ -292,3 +293,21 @@ def test_the_safety_share_against_a_direct_computation():
     # the sets held the truth at every epoch: at an epoch sample, never inside while clear
     at_epochs = estimation.epoch_index
     assert not (inside[at_epochs] & said_clear[at_epochs]).any()
+
+
+def test_a_declared_fault_is_not_reported_as_a_broken_guarantee():
+    broken = {
+        "containment": 0.9,
+        "empty_epochs": 2,
+        "epoch_status": {"inconsistent": 2, "lost": 0},
+    }
+    plain = parse_scenario(hall_with(""), source="plain.toml")
+    assert plain.injected_faults == ()
+    assert "the guarantee failed" in guarantee_failure(plain, broken)
+    sofa = parse_scenario(hall_with(SOFA), source="sofa.toml")
+    assert sofa.injected_faults == ("world.obstacles",)
+    assert guarantee_failure(sofa, broken) is None
+    failure = '\n[[events]]\nkind = "sonar_failure"\nt_s = 5.0\nduration_s = 1.0\n'
+    silent = parse_scenario(hall_with(failure), source="f.toml")
+    assert silent.injected_faults == ("events sonar_failure",)
+    assert guarantee_failure(silent, broken) is None
