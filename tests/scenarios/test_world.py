@@ -311,3 +311,30 @@ def test_a_declared_fault_is_not_reported_as_a_broken_guarantee():
     silent = parse_scenario(hall_with(failure), source="f.toml")
     assert silent.injected_faults == ("events sonar_failure",)
     assert guarantee_failure(silent, broken) is None
+
+
+@pytest.mark.parametrize(
+    ("line", "key", "reason"),
+    [
+        ("control_rate_hz = 30.0", "route.control_rate_hz", "whole number"),
+        ("control_rate_hz = 200.0", "route.control_rate_hz", "whole number"),
+        ("control_rate_hz = 0.0", "route.control_rate_hz", "> 0"),
+        ("safety_margin_m = -0.1", "route.safety_margin_m", ">= 0"),
+        ("follow = 'map'", "route.follow", "one of"),
+    ],
+)
+def test_bad_closed_loop_keys_are_refused(line, key, reason):
+    text = hall_with("").replace("loop = true", f"loop = true\n{line}")
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(text, source="r.toml")
+    assert info.value.key == key and reason in info.value.reason
+
+
+def test_the_closed_loop_defaults():
+    spec = parse_scenario(hall_with(""), source="r.toml")
+    assert spec.follow == "estimate" and spec.estimation.fusion == "truncated_heading"
+    assert spec.control_rate_hz == 10.0 and spec.control_stride == 10
+    truth = parse_scenario(
+        hall_with("").replace("loop = true", "loop = true\nfollow = 'truth'"), source="r.toml"
+    )
+    assert truth.estimation.fusion == "clamp" and truth.control_stride == 1
