@@ -2,7 +2,8 @@
 
     python benchmarks/pipeline.py [SCENARIO] [--duration S] [--tracker sivia|imagesp] [--repeat R]
 
-Runs what ``robotsim run`` runs (default: ``hall``, 600 s): the physics loop, the sensors,
+Runs what ``robotsim run`` runs steering on the truth (``follow = "truth"``, the paper's
+clamp; default: ``hall``, 600 s): the physics loop, the sensors,
 the 100 Hz dead reckoning of both branches, the interval epochs, the fusion, the summary and
 the rerun recording (to a temporary file). The physics/sensors split comes from the
 simulator's progress callback (it reports 1.0 when the physics loop ends). Prints each
@@ -30,7 +31,7 @@ from scenarios.metrics import summarize
 from scenarios.pipeline import estimate, estimate_offline, estimation_summary
 from scenarios.recording import write_recording
 from scenarios.runner import simulate_spec
-from scenarios.spec import load_scenario
+from scenarios.spec import Follow, load_scenario
 from validated_records import choices
 
 STAGES = (
@@ -96,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
         "--repeat", type=int, default=1, help="repeats, best kept per stage (default: %(default)s)"
     )
     args = parser.parse_args(argv)
-    spec = load_scenario(args.scenario).with_run(duration_s=args.duration)
+    # the open-loop pipeline with the paper's clamp (the closed loop: closed_loop.py --timing)
+    loaded = load_scenario(args.scenario).with_run(duration_s=args.duration)
+    spec = dataclasses.replace(loaded, follow=Follow.TRUTH).with_estimation(fusion="clamp")
     if args.tracker:
         spec = dataclasses.replace(spec, estimation=spec.estimation.with_keys(tracker=args.tracker))
 

@@ -295,6 +295,11 @@ class OnlineLocalizer:
         )
 
     @property
+    def map_segments(self) -> np.ndarray:
+        """``(m, 2, 2)`` the walls the localiser knows, m (read-only): its map, nothing else."""
+        return self._scene.segments
+
+    @property
     def last_set(self) -> Subpaving | None:
         """The latest epoch's set (None before the first epoch and after one without a set)."""
         return self._previous

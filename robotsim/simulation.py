@@ -6,11 +6,12 @@ generators of the run's ``Generator`` (one child per sensor, so switching one se
 faults on leaves the other sensors' draws unchanged).
 
 Closed loop (an :class:`Observer`: the robot's estimator): the noise does not depend on the
-motion, so it is drawn before the loop; at each step the loop computes the previous
-sample's readings from it (the same arithmetic as the vectorised pass, which still writes
-the log), hands them to the observer and steers on the pose the observer gives back. The
-controller thus sees the estimate one sample late (the accelerometer's central difference
-at a sample needs the next one), a 10 ms latency at 100 Hz.
+motion, so it is drawn before the loop; at each control tick (every ``control_stride``
+steps) the loop computes the readings of the samples since the last tick from it (the
+same arithmetic as the vectorised pass, which still writes the log), hands them to the
+observer and steers on the pose the observer gives back, the command held until the next
+tick. The controller thus sees the estimate one sample late (the accelerometer's central
+difference at a sample needs the next one), a 10 ms latency at 100 Hz.
 
 Commands: the controller asks for a body velocity; the robot's software turns it into
 wheel rates with the NOMINAL radius, and the wheels move the body with the TRUE radii
@@ -30,6 +31,7 @@ import numpy as np
 from robotsim.control import Plan, limit_command
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap
+from robotsim.obstacles import NO_OBSTACLES, Obstacles
 from robotsim.robot import RobotParams, body_velocity, wheel_rates, wrap_angle
 from robotsim.sensors.encoders import EncoderParams, ticks_from_slip, wheel_rotation_increments
 from robotsim.sensors.imu import (
@@ -41,7 +43,6 @@ from robotsim.sensors.imu import (
 )
 from robotsim.sensors.sonar import (
     SonarBeltParams,
-    cone_distances,
     readings_from_draws,
     sonar_draws,
 )
@@ -67,12 +68,54 @@ class KidnapEvent:
     pose: tuple[float, float, float]
 
 
+@dataclass(frozen=True)
+class SonarFailure:
+    """The sonars ``sensors`` (indices into the belt) fail at the scans taken from
+    ``start_s`` (included) to ``end_s`` (excluded): each returns ``reading_m`` (``inf``: no
+    echo, the default; a number: a reading stuck at that value)."""
+
+    start_s: float
+    end_s: float
+    sensors: tuple[int, ...]
+    reading_m: float = math.inf
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sensors", tuple(int(i) for i in self.sensors))
+        if not (math.isfinite(self.start_s) and self.start_s < self.end_s):
+            raise RobotsimError(
+                f"sonar failure: start_s must be finite and before end_s, got {self.start_s}, {self.end_s}"
+            )
+        if not self.sensors or min(self.sensors) < 0:
+            raise RobotsimError(f"sonar failure: sensors must be indices >= 0, got {self.sensors}")
+        if not (
+            self.reading_m == math.inf or (math.isfinite(self.reading_m) and self.reading_m >= 0)
+        ):
+            raise RobotsimError(
+                f"sonar failure: reading_m must be inf (no echo) or a range >= 0, got {self.reading_m}"
+            )
+
+
+def apply_failures(
+    readings_m: np.ndarray, fault: np.ndarray, scan_t_s: np.ndarray, failures
+) -> tuple[np.ndarray, np.ndarray]:
+    """The readings ``(M, k)`` and fault mask of the scans at ``scan_t_s (M,)`` with the
+    failed sensors' readings replaced (:class:`SonarFailure`; a failed reading is a fault)."""
+    readings_m, fault = readings_m.copy(), fault.copy()
+    for failure in failures:
+        rows = (scan_t_s >= failure.start_s) & (scan_t_s < failure.end_s)
+        cells = np.ix_(rows, np.array(failure.sensors))
+        readings_m[cells] = failure.reading_m
+        fault[cells] = True
+    return readings_m, fault
+
+
 class Observer(Protocol):
     """The robot's estimator in a closed loop: fed every sample as the robot gets it, asked
     for the pose the controller steers on."""
 
-    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
-        """Sample at ``t_s``: tick increments ``(2,)`` int64, yaw rate, specific force ``(2,)``."""
+    def odometry_block(self, t_s, ticks, gyro_rad_s, accel_m_s2) -> None:
+        """Consecutive samples at ``t_s (n,)``: tick increments ``(n, 2)`` int64, yaw rates
+        ``(n,)``, specific forces ``(n, 2)``."""
 
     def scan(self, t_s: float, readings_m) -> None:
         """The sonar scan ``(k,)`` taken at ``t_s`` (after that sample's odometry)."""
@@ -128,7 +171,10 @@ class SimulationLog:
         sonar_true_range_m (M, k) exact cone distances, no range limit (truth).
     kidnap_t_s (K,): the sample times at which the robot was kidnapped.
     wall_contact (N,) bool: pymunk resolved a contact between the robot and a wall during
-    the step that starts at the sample (the last sample, which no step follows, is False).
+    the step that starts at the sample (the last sample, which no step follows, is False);
+    obstacle_contact (N,) bool: the same for the unmapped obstacles.
+    Sonar faults include the readings of failed sensors (:class:`SonarFailure`), and the
+    true ranges are to the walls and the obstacles as they were at the scan.
     """
 
     t_s: np.ndarray
@@ -147,6 +193,7 @@ class SimulationLog:
     sonar_true_range_m: np.ndarray
     kidnap_t_s: np.ndarray
     wall_contact: np.ndarray
+    obstacle_contact: np.ndarray
     rate_hz: float
     robot: RobotParams
     sensors: SensorSuite
@@ -171,6 +218,9 @@ def simulate(
     kidnaps: tuple[KidnapEvent, ...] = (),
     progress: Callable[[float], None] | None = None,
     observer: Observer | None = None,
+    obstacles: Obstacles = NO_OBSTACLES,
+    sonar_failures: tuple[SonarFailure, ...] = (),
+    control_stride: int = 1,
 ) -> SimulationLog:
     """Simulate ``duration_s`` seconds of the robot following ``plan`` in ``segment_map``.
 
@@ -186,26 +236,48 @@ def simulate(
             1 %), for a progress bar; the sensors after the loop take a small share.
         observer: None (the controller steers on the true pose), or the estimator the
             controller steers on (closed loop, module docstring).
+        obstacles: things in the world that ``segment_map`` lacks (``robotsim.obstacles``):
+            in the physics and in the sonar's view.
+        sonar_failures: windows in which some sonars return a failure value.
+        control_stride: with an ``observer``, the steps from one control tick to the next
+            (the controller's period in samples; without an observer it runs every step).
 
     Raises:
-        RobotsimError: a bad duration, or a start or kidnap pose that collides with a wall.
+        RobotsimError: a bad duration, a start or kidnap pose that collides with a wall or
+            an obstacle, a failure naming a sensor the belt lacks.
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise RobotsimError(f"duration_s must be positive and finite, got {duration_s}")
     rate_hz = world.step_hz
     count = round(duration_s * rate_hz) + 1
-    sim_world = World(segment_map, robot, start_pose, world)
+    sim_world = World(segment_map, robot, start_pose, world, obstacles)
     schedule = _kidnap_schedule(kidnaps, rate_hz, count, sim_world)
     belt = sensors.sonar
+    for failure in sonar_failures:
+        if max(failure.sensors) >= belt.count:
+            raise RobotsimError(
+                f"sonar failure: sensor {max(failure.sensors)} is not on the belt of {belt.count}"
+            )
+    sonar = _SonarWorld(segment_map, obstacles, belt, tuple(sonar_failures))
     scans = np.unique(np.round(np.arange(0.0, duration_s + 1e-9, 1.0 / belt.rate_hz) * rate_hz))
     scans = scans[scans < count].astype(np.int64)
     noise = SensorNoise.draw(count, len(scans), sensors, rate_hz, rng)
     stream = None
     if observer is not None:
-        stream = _SensorStream(noise, scans, segment_map, robot, sensors, rate_hz, count, schedule)
+        stream = _SensorStream(noise, scans, sonar, robot, sensors, rate_hz, count, schedule)
 
-    states, commands, contact = _run_physics(
-        sim_world, plan.controller(robot), robot, count, schedule, progress, stream, observer
+    if int(control_stride) != control_stride or control_stride < 1:
+        raise RobotsimError(f"control_stride must be an integer >= 1, got {control_stride}")
+    states, commands, contact, obstacle_contact = _run_physics(
+        sim_world,
+        plan.controller(robot),
+        robot,
+        count,
+        schedule,
+        progress,
+        stream,
+        observer,
+        int(control_stride),
     )
     t_s = np.arange(count) / rate_hz
     pose = np.column_stack([states[:, :2], wrap_angle(states[:, 2])])
@@ -221,14 +293,7 @@ def simulate(
     accel = specific_force(velocity, rate_hz) + noise.accel_bias + noise.accel_white
     gyro_bias, accel_bias = noise.gyro_bias, noise.accel_bias
 
-    true_range = cone_distances(
-        pose[scans],
-        segment_map.segments,
-        belt.mount_xy,
-        belt.mount_angle_rad,
-        belt.half_aperture_rad,
-    )
-    readings, fault = readings_from_draws(true_range, belt, noise.sonar)
+    true_range, readings, fault = sonar.scans(pose[scans], t_s[scans], noise.sonar)
 
     return SimulationLog(
         t_s=t_s,
@@ -247,6 +312,7 @@ def simulate(
         sonar_true_range_m=true_range,
         kidnap_t_s=t_s[kidnapped],
         wall_contact=contact,
+        obstacle_contact=obstacle_contact,
         rate_hz=rate_hz,
         robot=robot,
         sensors=sensors,
@@ -265,8 +331,40 @@ def _kidnap_schedule(
             raise RobotsimError(
                 f"kidnap time {event.t_s} s is outside the run (0, {(count - 1) / rate_hz}] s"
             )
-        schedule[index] = sim_world.check_free(event.pose)
+        schedule[index] = sim_world.check_free(event.pose, t_s=index / rate_hz)
     return schedule
+
+
+class _SonarWorld:
+    """What the sonar belt sees: the map's walls and the obstacles at the scan's time, then
+    the error model and the failures (the same arithmetic for a block of scans or one)."""
+
+    def __init__(
+        self,
+        segment_map: SegmentMap,
+        obstacles: Obstacles,
+        belt: SonarBeltParams,
+        failures: tuple[SonarFailure, ...],
+    ) -> None:
+        self.segments, self.obstacles, self.belt, self.failures = (
+            segment_map.segments,
+            obstacles,
+            belt,
+            failures,
+        )
+
+    def scans(
+        self, poses: np.ndarray, t_s: np.ndarray, draws: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """True ranges, readings and fault mask ``(M, k)`` of the scans at ``poses (M, 3)``,
+        times ``t_s (M,)``, from the sonar draws of those scans."""
+        belt = self.belt
+        true_range = self.obstacles.cone_distances(
+            poses, t_s, self.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+        )
+        readings, fault = readings_from_draws(true_range, belt, draws)
+        readings, fault = apply_failures(readings, fault, t_s, self.failures)
+        return true_range, readings, fault
 
 
 #: Number of progress reports over a run's physics loop.
@@ -282,14 +380,17 @@ def _run_physics(
     progress=None,
     stream: _SensorStream | None = None,
     observer: Observer | None = None,
+    control_stride: int = 1,
 ):
     """The per-step loop: returns states ``(count, 5)`` = (x, y, theta unwrapped, v, omega),
-    the wanted commands ``(count, 2)`` and the wall-contact flags ``(count,)`` bool.
+    the wanted commands ``(count, 2)`` and the wall- and obstacle-contact flags ``(count,)``
+    bool.
 
-    Contacts come from :meth:`World.on_wall_contact` (pymunk's solver): its callback sets a
-    flag that the loop reads and clears after each step. With an ``observer``, ``stream``
-    gives it each sample once the next state is known, and the controller steers on the
-    observer's pose.
+    Contacts come from :meth:`World.on_wall_contact` and :meth:`World.on_obstacle_contact`
+    (pymunk's solver): their callbacks set flags that the loop reads and clears after each
+    step. With an ``observer``, the controller runs every ``control_stride`` steps (its
+    command held in between): at each such step ``stream`` gives the observer the samples
+    whose next state is known, and the controller steers on the observer's pose.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -301,15 +402,20 @@ def _run_physics(
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
     states: list[tuple[float, float, float, float, float]] = []
     commands: list[tuple[float, float]] = []
-    touched = [False]
+    touched = [False, False]  # a wall, an obstacle during this step
 
-    def note_contact() -> None:
+    def note_wall() -> None:
         touched[0] = True
 
-    sim_world.on_wall_contact(note_contact)
+    def note_obstacle() -> None:
+        touched[1] = True
+
+    sim_world.on_wall_contact(note_wall)
+    sim_world.on_obstacle_contact(note_obstacle)
     contact = np.zeros(count, dtype=bool)
+    obstacle_contact = np.zeros(count, dtype=bool)
     report_every = max(1, count // PROGRESS_REPORTS)
-    target = (0.0, 0.0)
+    target = wanted = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
     for k in range(count):
         if progress is not None and k % report_every == 0:
@@ -319,17 +425,18 @@ def _run_physics(
         now = state()
         states.append(now)
         if stream is not None and observer is not None:
-            if k >= 1:
-                stream.emit(k - 1, states, observer)
             if k == count - 1:
-                stream.emit(k, states, observer)
+                stream.emit(k + 1, states, observer)
                 break
-            x, y, theta = observer.pose()
+            if k % control_stride == 0:  # a control tick: the samples so far, then the pose
+                stream.emit(k, states, observer)
+                x, y, theta = observer.pose()
+                wanted = command(k * dt_s, x, y, theta)
         elif k == count - 1:
             break
         else:
             x, y, theta, _, _ = now
-        wanted = command(k * dt_s, x, y, theta)
+            wanted = command(k * dt_s, x, y, theta)
         commands.append(wanted)
         wanted_v, wanted_omega = wanted
         target = limit_command(
@@ -343,21 +450,26 @@ def _run_physics(
         if touched[0]:
             contact[k] = True
             touched[0] = False
+        if touched[1]:
+            obstacle_contact[k] = True
+            touched[1] = False
     if progress is not None:
         progress(1.0)
     commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
-    return np.array(states), np.array(commands, dtype=np.float64), contact
+    return np.array(states), np.array(commands, dtype=np.float64), contact, obstacle_contact
 
 
 class _SensorStream:
-    """The readings of one sample from the drawn noise and the states so far: the arithmetic
-    of the vectorised pass of :func:`simulate`, element by element, in sample order."""
+    """The readings of the samples so far from the drawn noise and the states: the
+    arithmetic of the vectorised pass of :func:`simulate` on a window of rows, in sample
+    order (each row's value is the one the whole-run pass computes: element-wise formulas,
+    the central difference over the row's neighbours, the cumulative turn continued)."""
 
     def __init__(
         self,
         noise: SensorNoise,
         scans: np.ndarray,
-        segment_map: SegmentMap,
+        sonar: _SonarWorld,
         robot: RobotParams,
         sensors: SensorSuite,
         rate_hz: float,
@@ -365,47 +477,56 @@ class _SensorStream:
         schedule: dict[int, np.ndarray],
     ) -> None:
         self.noise, self.robot, self.sensors = noise, robot, sensors
-        self.segments = segment_map.segments
-        self.scan_of = {int(sample): m for m, sample in enumerate(scans)}
+        self.sonar = sonar
+        self.scans = scans
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
-        self.turned = np.zeros(2)  # cumulative wheel turns with slip, rad
-        self.counted = np.zeros(2)  # ticks counted so far
+        self.done = 0  # samples handed over so far
+        self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
+        self.counted = np.zeros((1, 2))  # ticks counted so far
 
-    def emit(self, j: int, states: list, observer: Observer) -> None:
-        """Hand sample ``j`` (and its scan, if any) to ``observer``; ``states`` holds rows
-        ``0..j+1`` (or ``0..j`` for the last sample)."""
+    def emit(self, stop: int, states: list, observer: Observer) -> None:
+        """Hand samples ``done .. stop - 1`` (and their scans) to ``observer``; ``states``
+        holds rows ``0..stop`` (``0..stop - 1`` when ``stop`` is the sample count)."""
+        start = self.done
+        if stop <= start:
+            return
         robot, noise, rate_hz = self.robot, self.noise, self.rate_hz
-        if j == 0:
-            rotation = np.zeros(2)
-        elif j in self.schedule:
-            rotation = wheel_rates(states[j - 1][3:5], robot.true_radii_m, robot.wheel_base_m)
-            rotation = rotation / rate_hz
-        else:
-            window = np.array([states[j - 1][:3], states[j][:3]])
-            rotation = wheel_rotation_increments(window, robot)[1]
-        self.turned = self.turned + rotation * (
-            1.0 + self.sensors.encoders.slip_std * noise.slip[j]
-        )
-        counted = np.floor(self.turned * (robot.ticks_per_rev / (2.0 * np.pi)))
-        ticks = (counted - self.counted).astype(np.int64)
-        self.counted = counted
-        v, omega = states[j][3], states[j][4]
-        gyro = omega + noise.gyro_bias[j] + noise.gyro_white[j]
-        low, high = max(j - 1, 0), min(j + 1, self.count - 1)
-        window_v = np.array([states[i][3] for i in range(low, high + 1)])
-        force = specific_force(np.column_stack([window_v, np.zeros_like(window_v)]), rate_hz)
-        accel = (
-            np.array([force[j - low, 0], v * omega]) + noise.accel_bias[j] + noise.accel_white[j]
-        )
-        t_s = j / rate_hz
-        observer.odometry(t_s, ticks, gyro, accel)
-        scan = self.scan_of.get(j)
-        if scan is not None:
-            x, y, theta = states[j][:3]
-            pose = np.array([[x, y, wrap_angle(theta)]])
-            belt = self.sensors.sonar
-            true_range = cone_distances(
-                pose, self.segments, belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad
+        low, high = max(start - 1, 0), min(stop + 1, self.count)  # rows for the differences
+        window = np.array(states[low:high])
+        rotation = wheel_rotation_increments(window[:, :3], robot)[start - low : stop - low]
+        for j in self.schedule:  # the jump is not odometry: the wheels turned as the robot drove
+            if start <= j < stop:
+                before = window[j - 1 - low, 3:5]
+                rotation[j - start] = (
+                    wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
+                )
+        turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
+        total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
+        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))
+        ticks = np.diff(np.concatenate([self.counted, counted[1:]]), axis=0).astype(np.int64)
+        self.turned, self.counted = total[-1:], counted[-1:]
+        velocity = window[:, 3:5]
+        rows = slice(start - low, stop - low)
+        gyro = velocity[rows, 1] + noise.gyro_bias[start:stop] + noise.gyro_white[start:stop]
+        force = specific_force(velocity, rate_hz)[rows]
+        accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
+        t_s = np.arange(start, stop) / rate_hz
+        in_block = self.scans[(self.scans >= start) & (self.scans < stop)]
+        readings = np.zeros((0, self.sensors.sonar.count))
+        if in_block.size:
+            m = np.searchsorted(self.scans, in_block)
+            pose = window[in_block - low, :3].copy()
+            pose[:, 2] = wrap_angle(pose[:, 2])
+            draws = tuple(draw[m] for draw in noise.sonar)
+            _, readings, _ = self.sonar.scans(pose, in_block / rate_hz, draws)
+        begin = 0
+        for scan, sample in enumerate(in_block.tolist()):  # each scan after its sample
+            end = sample - start + 1
+            observer.odometry_block(
+                t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
             )
-            draws = tuple(draw[scan : scan + 1] for draw in noise.sonar)
-            observer.scan(t_s, readings_from_draws(true_range, belt, draws)[0][0])
+            observer.scan(float(t_s[end - 1]), readings[scan])
+            begin = end
+        if begin < stop - start:
+            observer.odometry_block(t_s[begin:], ticks[begin:], gyro[begin:], accel[begin:])
+        self.done = stop

@@ -11,6 +11,11 @@ forces drag the robot body along, as the wheels' traction would:
 
 Wall contacts have unbounded force, so a wall stops the robot while the traction gives
 way. The true pose and velocity are whatever pymunk computes.
+
+Unmapped obstacles (``robotsim.obstacles``) are shapes of the same thickness as the walls:
+static ones on the static body, each moving one on a kinematic body of its own, put at its
+path's position at the start of every step and given the velocity that reaches the next
+one (pymunk pushes the robot with it, with unbounded force).
 """
 
 from __future__ import annotations
@@ -25,9 +30,13 @@ import shapely
 
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap, point_segment_distance
+from robotsim.obstacles import NO_OBSTACLES, Obstacle, Obstacles
 from robotsim.robot import RobotParams
 
 _GRAVITY_M_S2 = 9.81
+
+#: pymunk collision types: the robot's disk, the map's walls, the unmapped obstacles.
+ROBOT_SHAPE, WALL_SHAPE, OBSTACLE_SHAPE = 1, 0, 2
 
 
 @dataclass(frozen=True)
@@ -77,7 +86,8 @@ class WorldParams:
 
 
 class World:
-    """A pymunk space holding the walls of ``segment_map`` and the robot at ``pose``.
+    """A pymunk space holding the walls of ``segment_map``, the ``obstacles`` and the robot at
+    ``pose`` (time 0).
 
     Mutable (it is the simulation state); :meth:`step` advances it by ``1 / step_hz``.
     """
@@ -88,10 +98,14 @@ class World:
         robot: RobotParams,
         pose,
         params: WorldParams = WorldParams(),
+        obstacles: Obstacles = NO_OBSTACLES,
     ) -> None:
         self.map = segment_map
         self.robot = robot
         self.params = params
+        self.obstacles = obstacles
+        self.t_s = 0.0
+        self._steps = 0
         self.dt_s = 1.0 / params.step_hz
         self._substep_s = self.dt_s / params.substeps
         self._substeps = range(int(params.substeps))
@@ -104,11 +118,31 @@ class World:
             wall = pymunk.Segment(space.static_body, (ax, ay), (bx, by), params.wall_radius_m)
             wall.friction = params.wall_friction
             space.add(wall)
+        self._movers: list[tuple[Obstacle, pymunk.Body]] = []  # each moving obstacle, its body
+        for obstacle in obstacles.items:
+            body = space.static_body
+            origin = np.zeros(2)
+            if obstacle.moving:
+                body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+                origin = obstacle.reference_m
+                body.position = (float(origin[0]), float(origin[1]))
+                space.add(body)
+                self._movers.append((obstacle, body))
+            local = (obstacle.vertices_m - origin).tolist()
+            shape = (
+                pymunk.Poly(body, local, radius=params.wall_radius_m)
+                if obstacle.polygon
+                else pymunk.Segment(body, local[0], local[1], params.wall_radius_m)
+            )
+            shape.friction = params.wall_friction
+            shape.collision_type = OBSTACLE_SHAPE
+            space.add(shape)
 
         moment = pymunk.moment_for_circle(robot.mass_kg, 0.0, robot.radius_m)
         body = pymunk.Body(robot.mass_kg, moment)
         disk = pymunk.Circle(body, robot.radius_m)
         disk.friction = 1.0  # combined with the wall's by multiplication
+        disk.collision_type = ROBOT_SHAPE
         control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
         traction_n = params.traction_coefficient * robot.mass_kg * _GRAVITY_M_S2
         pivot = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
@@ -120,26 +154,48 @@ class World:
         space.add(body, disk, control, pivot, gear)
 
         self._space, self._body, self._control = space, body, control
+        self._contact: dict[int, Callable[[], None]] = {}
+
+        def post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, data: dict) -> None:
+            # the robot's disk is the only dynamic shape: every solved contact is the robot
+            # against a wall or an obstacle (kinematic and static shapes do not collide)
+            kinds = {shape.collision_type for shape in arbiter.shapes}
+            callback = self._contact.get(OBSTACLE_SHAPE if OBSTACLE_SHAPE in kinds else WALL_SHAPE)
+            if callback is not None:
+                callback()
+
+        space.on_collision(None, None, post_solve=post_solve)
+        self._place_movers()
         self.teleport(pose)
 
     def on_wall_contact(self, callback: Callable[[], None]) -> None:
         """Call ``callback()`` each time pymunk's solver resolves a contact of the robot with a
-        wall (a ``post_solve`` handler on every pair of shapes: the robot's disk is the only
-        dynamic shape, so every solved contact is the robot against a wall); called during
-        :meth:`step`, possibly several times a step.
+        wall of the map (a ``post_solve`` handler); called during :meth:`step`, possibly
+        several times a step.
 
         The callback only observes: it gets no handle on the space and must not change the
         world from inside the solver. A later call replaces the earlier callback.
         """
+        self._contact[WALL_SHAPE] = callback
 
-        def post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, data: dict) -> None:
-            callback()
+    def on_obstacle_contact(self, callback: Callable[[], None]) -> None:
+        """As :meth:`on_wall_contact`, for the contacts of the robot with an obstacle."""
+        self._contact[OBSTACLE_SHAPE] = callback
 
-        self._space.on_collision(None, None, post_solve=post_solve)
+    def _place_movers(self) -> None:
+        """Put each moving obstacle where its path has it at :attr:`t_s`, with the velocity
+        that takes it to where it is one step later."""
+        for obstacle, body in self._movers:
+            now, then = obstacle.offset_m(np.array([self.t_s, self.t_s + self.dt_s]))
+            x, y = (obstacle.reference_m + now).tolist()
+            vx, vy = ((then - now) / self.dt_s).tolist()
+            body.position, body.velocity = (x, y), (vx, vy)
+            self._space.reindex_shapes_for_body(body)
 
-    def check_free(self, pose) -> np.ndarray:
+    def check_free(self, pose, t_s: float | None = None) -> np.ndarray:
         """The pose as a float array ``(3,)`` if the robot's disk fits there (clear of all
-        walls, inside the boundary); otherwise a :class:`RobotsimError` naming the reason."""
+        walls and of the obstacles as they are at ``t_s``, by default now, inside the
+        boundary); otherwise a :class:`RobotsimError` naming the reason."""
         pose = np.asarray(pose, dtype=np.float64)
         if pose.shape != (3,) or not np.isfinite(pose).all():
             raise RobotsimError(
@@ -159,6 +215,13 @@ class World:
         ):
             raise RobotsimError(
                 f"the robot at ({pose[0]:g}, {pose[1]:g}) is outside the walls of map {self.map.name!r}"
+            )
+        when = self.t_s if t_s is None else t_s
+        gap = self.obstacles.clearance_m(pose[:2], when)
+        if gap < needed:
+            raise RobotsimError(
+                f"the robot at ({pose[0]:g}, {pose[1]:g}) overlaps an obstacle at t = {when:g} s "
+                f"(clearance {gap:.3f} m < {needed:.3f} m)"
             )
         return pose
 
@@ -182,6 +245,10 @@ class World:
         control.angular_velocity = omega_rad_s
         for _ in self._substeps:
             space.step(substep_s)
+        self._steps += 1
+        self.t_s = self._steps * self.dt_s
+        if self._movers:
+            self._place_movers()
 
     def state(self) -> tuple[float, float, float, float, float]:
         """True ``(x_m, y_m, theta_rad, v_m_s, omega_rad_s)``: theta unwrapped, ``v`` the

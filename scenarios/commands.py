@@ -185,11 +185,18 @@ def guarantee_failure(spec: ScenarioSpec, summary: dict[str, Any]) -> str | None
 
     With a sonar without faults (``outlier_prob = lost_echo_prob = 0``) every interval set
     must hold the truth; a containment below 1 there is a defect, not bad luck. With faults
-    configured, more than ``q_max`` outliers in a scan may legitimately lose the truth.
+    configured, more than ``q_max`` outliers in a scan may legitimately lose the truth; so
+    may a world that differs from the map, a kidnapping or failed sonars
+    (``ScenarioSpec.injected_faults``).
     """
     sonar = spec.sensors.sonar
-    if sonar.outlier_prob > 0.0 or sonar.lost_echo_prob > 0.0 or "containment" not in summary:
-        return None  # faults configured, or no interval sets (the particle filter's run)
+    if (
+        sonar.outlier_prob > 0.0
+        or sonar.lost_echo_prob > 0.0
+        or spec.injected_faults
+        or "containment" not in summary
+    ):
+        return None  # faults configured or injected, or no interval sets (the particle filter)
     containment, empty = summary["containment"], summary["empty_epochs"]
     broken = []
     if containment is not None and containment < 1.0:

@@ -11,6 +11,7 @@ import itertools
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import shapely
 from scipy import special
 
 from robotsim.control import Route
@@ -41,6 +42,7 @@ def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m
     )
     summary["walls"]["pymunk_contact_steps"] = int(np.count_nonzero(log.wall_contact))
+    summary["walls"]["obstacle_contact_steps"] = int(np.count_nonzero(log.obstacle_contact))
     summary["sensors"] = {
         "encoders": encoder_stats(log.wheel_ticks),
         "gyro": gyro_stats(log.gyro_rad_s, log.velocity[:, 1]),
@@ -175,6 +177,7 @@ def interval_stats(epochs: EpochLog) -> dict[str, Any]:
             "max_components": int(epochs.components.max()) if len(epochs.t_s) else 0,
         },
         "q_used_max": int(epochs.q_used.max()) if len(epochs.t_s) else 0,
+        "q_used_epochs": int(np.count_nonzero(epochs.q_used > 0)),
         "empty_epochs": counts["inconsistent"] + counts["lost"],
         "inconsistent_epochs": counts["inconsistent"],
         "coarse_epochs": int(np.count_nonzero(epochs.coarse)),
@@ -322,3 +325,58 @@ def route_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         }
     )
     return stats
+
+
+def set_wall_distance_m(epochs: EpochLog, segments: np.ndarray) -> np.ndarray:
+    """``(E,)`` the distance from each epoch's set (the union of its outer boxes in x, y) to
+    the nearest wall segment ``(m, 2, 2)``, m: the least distance of its boxes (0 where a
+    box touches a wall; NaN without a set). One vectorised shapely call over all boxes."""
+    walls = shapely.multilinestrings(shapely.linestrings(segments))
+    boxes = epochs.boxes
+    each = shapely.distance(
+        shapely.box(boxes[:, 0, 0], boxes[:, 1, 0], boxes[:, 0, 1], boxes[:, 1, 1]), walls
+    )
+    distance = np.full(len(epochs.t_s), np.nan)
+    with_boxes = epochs.box_counts > 0
+    starts = (np.cumsum(epochs.box_counts) - epochs.box_counts)[with_boxes]
+    if starts.size:
+        distance[with_boxes] = np.minimum.reduceat(each, starts)
+    distance[~epochs.has_set] = np.nan
+    return distance
+
+
+def safety_stats(
+    spec: ScenarioSpec, log: SimulationLog, epochs: EpochLog, epoch_index: np.ndarray
+) -> dict[str, Any]:
+    """How often the true robot came within ``[route] safety_margin_m`` of the map's walls
+    while its latest interval set said it was clear of them (every pose of the set farther
+    than the margin: :func:`set_wall_distance_m`), as shares of the samples.
+
+    The gap is the footprint's (the robot's radius and the walls' collision radius, as in
+    :func:`wall_stats`). A set holds from its epoch's sample to the next epoch; before the
+    first and after an epoch without a set, the set says nothing (not clear). With sets
+    that always hold the truth the last share is 0 at the epoch samples; between epochs the
+    robot moves on.
+    """
+    margin = spec.safety_margin_m
+    reach = spec.robot.radius_m + log.world.wall_radius_m
+    segments = spec.map.segments
+    chunk = max(1, 1_000_000 // max(1, len(segments)))
+    distance = np.concatenate(
+        [
+            point_segment_distance(
+                log.pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
+            ).min(axis=1)
+            for start in range(0, len(log.pose), chunk)
+        ]
+    )
+    inside = distance - reach < margin
+    clear_at_epoch = set_wall_distance_m(epochs, segments) - reach > margin  # NaN: False
+    latest = np.searchsorted(epoch_index, np.arange(len(log.t_s)), side="right") - 1
+    said_clear = np.where(latest >= 0, clear_at_epoch[np.maximum(latest, 0)], False)
+    return {
+        "margin_m": margin,
+        "inside_margin_share": float(inside.mean()),
+        "set_clear_share": float(said_clear.mean()),
+        "inside_margin_while_set_clear_share": float((inside & said_clear).mean()),
+    }

@@ -74,6 +74,7 @@ __all__ = [
     "estimation_summary",
     "gathered",
     "localizer_for",
+    "recovery_s",
     "scan_samples",
 ]
 
@@ -213,8 +214,8 @@ class Steering:
     def __init__(self, localizer: OnlineLocalizer, branch: int) -> None:
         self.localizer, self.branch = localizer, branch
 
-    def odometry(self, t_s: float, ticks, gyro_rad_s: float, accel_m_s2) -> None:
-        self.localizer.push_odometry(t_s, ticks, gyro_rad_s, accel_m_s2)
+    def odometry_block(self, t_s, ticks, gyro_rad_s, accel_m_s2) -> None:
+        self.localizer.push_odometry_block(t_s, ticks, gyro_rad_s, accel_m_s2)
 
     def scan(self, t_s: float, readings_m) -> None:
         self.localizer.push_scan(t_s, readings_m)
@@ -415,8 +416,9 @@ def estimation_summary(log: SensorData, estimation: Estimation) -> dict[str, Any
 
 
 def recovery_s(log: SensorData, estimation: Estimation, t_s: float) -> float | None:
-    """Seconds from ``t_s`` (a kidnapping) until the fused position is back near the truth
-    for good (:func:`scenarios.metrics.recovery_time_s`; None: not within the run)."""
+    """Seconds from ``t_s`` (a kidnapping, the onset of a fault) until the fused position is
+    back near the truth for good (:func:`scenarios.metrics.recovery_time_s`; None: not within
+    the run; 0: it never left)."""
     return recovery_time_s(log.t_s, log.rate_hz, estimation.pose[FUSED, :, :2], log.pose, t_s)
 
 

@@ -26,7 +26,7 @@ from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLo
 from robotsim.world import WorldParams
 from scenarios.errors import ScenarioError
 from scenarios.mcl_pipeline import Estimator, MclEstimation, estimate_mcl, mcl_summary
-from scenarios.metrics import route_stats, summarize
+from scenarios.metrics import route_stats, safety_stats, summarize
 from scenarios.pipeline import (
     BRANCHES,
     FUSED,
@@ -38,6 +38,7 @@ from scenarios.pipeline import (
     estimation_summary,
     gathered,
     localizer_for,
+    recovery_s,
 )
 from scenarios.spec import Follow, ScenarioSpec
 
@@ -165,6 +166,16 @@ def run_scenario(
     summary["estimator"] = str(Estimator.INTERVALS)
     summary.update(estimation_summary(log, estimation))
     summary["route"] = route_stats(spec, log)
+    summary["safety"] = safety_stats(spec, log, estimation.epochs, estimation.epoch_index)
+    summary["sonar_failures"] = [
+        {
+            "start_s": failure.start_s,
+            "end_s": failure.end_s,
+            "sensors": list(failure.sensors),
+            "recovery_s": recovery_s(log, estimation, failure.start_s),
+        }
+        for failure in spec.sonar_failures
+    ]
     return RunResult(
         log=log, estimation=estimation, summary=summary, times=times, duration_s=spec.run.duration_s
     )
@@ -196,4 +207,7 @@ def simulate_spec(
         kidnaps=kidnaps,
         progress=progress,
         observer=observer,
+        obstacles=spec.obstacles,
+        sonar_failures=spec.sonar_failures,
+        control_stride=spec.control_stride,
     )

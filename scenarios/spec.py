@@ -23,9 +23,10 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     Either ``waypoints_m`` (an array of ``[x, y]``, followed by pure pursuit; the other keys
     are the fields of ``robotsim.control.Route``) or ``[[route.profile]]`` steps
     ``{duration_s, v_m_s, omega_rad_s | omega_deg_s}`` played in order, then a stop. Without
-    a route the robot stands still. ``follow`` (:class:`Follow`, ``"truth"``): the pose the
-    pure pursuit steers on, the true one or, closed loop, the estimate of a localisation
-    branch (waypoints only: a profile ignores the pose).
+    a route the robot stands still. ``follow`` (:class:`Follow`; :func:`default_follow`:
+    ``"estimate"`` for waypoints): the pose the pure pursuit steers on, the true one or,
+    closed loop, the estimate of a localisation branch (waypoints only: a profile ignores
+    the pose).
 ``[sensors.encoders]``, ``[sensors.gyro]``, ``[sensors.accelerometer]``, ``[sensors.sonar]``
     The fields of the simulator's sensor parameter classes; for the sonar also ``count``
     (an even belt on the robot's rim, the default) in place of ``mount_xy`` and
@@ -33,11 +34,28 @@ defaults are the ones written here (for the robot and the sensors: the defaults 
     name with ``_deg`` in place of ``_rad`` (``half_aperture_deg``); never both. The sonar's
     ``rate_hz`` must divide ``run.rate_hz`` a whole number of times (a scan is taken at a
     sample; a faster or off-beat sonar is refused rather than silently slowed).
+    ``safety_margin_m`` (0.1): the clearance from the walls the summary checks the robot and
+    its interval sets against (``scenarios.metrics.safety_stats``). ``control_rate_hz``
+    (10.0, dividing ``run.rate_hz`` a whole number of times): in a closed loop, how often
+    the controller is given the estimate and recomputes its command (held in between);
+    steering on the truth it runs at every sample.
+``[world]``
+    What the world holds that the map lacks: ``[[world.obstacles]]``, each exactly one of
+    ``polygon_m`` (``[[x, y], ...]``, at least 3 vertices, a simple polygon of non-zero
+    area) or ``segment_m`` (``[[ax, ay], [bx, by]]``), in world coordinates at the start;
+    with ``path_m`` (``[[x, y], ...]``) it moves: its centroid visits the points in order at
+    ``speed_m_s`` (1.0), then stops, or with ``loop`` (false) goes back round from where
+    it started (``robotsim.obstacles``). Each lies inside the map's outer wall (moving ones
+    over their whole sweep, which crosses no wall), clear of the start footprint. The
+    physics and the sonar see them; the estimator's map does not.
 ``[[events]]``
     Things that happen to the robot during the run, each ``{kind, t_s, ...}`` with ``t_s``
     in ``(0, duration_s]`` (:class:`EventKind`): ``kind = "kidnap"`` moves the robot at
     ``t_s`` to ``xy_m`` (required) and ``heading_deg`` (0.0) without odometry; the pose must
-    be free, and two kidnaps may not fall on one sample.
+    be free, and two kidnaps may not fall on one sample. ``kind = "sonar_failure"``: from
+    ``t_s`` for ``duration_s`` (required, > 0) the ``sensors`` (``"all"``, the default, or
+    an array of belt indices) return ``reading_m`` (default: no echo; or a range in
+    ``[0, d_max_m]``, a reading stuck at that value).
 ``[estimation]``
     The localisation pipeline (paper 002), read into the records of the packages that use
     it: ``filter`` (``localization.dead_reckoning.DeadReckoningSettings``: ``"ukf"``; or
@@ -84,12 +102,13 @@ from localization.mcl import MclSettings
 from robotsim.control import Plan, Route, ScriptedProfile
 from robotsim.errors import RobotsimError
 from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
+from robotsim.obstacles import NO_OBSTACLES, Obstacle, Obstacles
 from robotsim.robot import RobotParams, wrap_angle
 from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import MAX_BELT_COUNT, SonarBeltParams
-from robotsim.simulation import KidnapEvent
-from robotsim.world import World
+from robotsim.simulation import KidnapEvent, SonarFailure
+from robotsim.world import World, WorldParams
 from scenarios.catalog import BUILTIN_FOLDER, DEFAULT_MAP, builtin_names
 from scenarios.errors import ScenarioError
 from scenarios.feasibility import check_feasible
@@ -150,11 +169,43 @@ class Follow(StrEnum):
     """Closed loop on the UKF-only branch (dead reckoning alone: it drifts)."""
 
 
+def default_follow(plan: Plan) -> Follow:
+    """The ``[route] follow`` a scenario file gets when it does not say: the closed loop on
+    the fused estimate for waypoints (``benchmarks/closed_loop.py``: on hall, office and the
+    apartment, every seed completes its route with containment 1), the truth for a scripted
+    profile or no route (nothing steers on a pose). A scenario with ``estimator = "mcl"``
+    gets the truth too (:func:`load_scenario`): the closed loop steers on the interval
+    pipeline's estimate."""
+    return Follow.ESTIMATE if isinstance(plan, Route) else Follow.TRUTH
+
+
+def default_fusion(follow: Follow) -> FusionRule:
+    """The ``[estimation] fusion`` a scenario file gets when it does not say: the paper's
+    clamp, except when the robot steers on the fused branch. The clamp moves the position
+    only, so the fused heading drifts with the gyro's bias (0.7 rad after ten minutes on
+    ``hall``, seed 1) and a robot steered on it crabs into the walls; the truncation with
+    the heading (``localization.fusion``) keeps the heading inside the set's interval and
+    lets the bias be learnt through the covariance."""
+    return FusionRule.TRUNCATED_HEADING if follow == Follow.ESTIMATE else FusionRule.CLAMP
+
+
 class EventKind(StrEnum):
     """What an ``[[events]]`` entry does."""
 
     KIDNAP = "kidnap"
     """The robot moved to another pose without the wheels turning (no odometry of the jump)."""
+    SONAR_FAILURE = "sonar_failure"
+    """Some sonars return no echo (or a stuck value) for a while."""
+
+
+#: ``[route] safety_margin_m``: its default and bounds, m.
+DEFAULT_SAFETY_MARGIN_M = 0.1
+SAFETY_MARGIN_BOUNDS = Bounds(minimum=0.0, maximum=10.0)
+
+#: ``[route] control_rate_hz``: the closed loop's control rate, Hz (a robot's navigation
+#: loop runs at 10 to 20 Hz over its 100 Hz odometry), and its bounds.
+DEFAULT_CONTROL_RATE_HZ = 10.0
+CONTROL_RATE_BOUNDS = Bounds(above=0.0, maximum=MAX_RATE_HZ)
 
 
 # ---------------------------------------------------------------------------------------
@@ -309,6 +360,33 @@ class ScenarioSpec:
     """The pose the route's controller steers on (:class:`Follow`)."""
     kidnaps: tuple[KidnapEvent, ...] = ()
     """The ``kidnap`` events, in time order."""
+    obstacles: Obstacles = NO_OBSTACLES
+    """``[world] obstacles``: in the physics and the sonar, not in the estimator's map."""
+    sonar_failures: tuple[SonarFailure, ...] = ()
+    """The ``sonar_failure`` events, in time order."""
+    safety_margin_m: float = DEFAULT_SAFETY_MARGIN_M
+    """``[route] safety_margin_m``: the clearance from the walls the summary checks, m."""
+    control_rate_hz: float = DEFAULT_CONTROL_RATE_HZ
+    """``[route] control_rate_hz``: the closed loop's control rate, Hz."""
+
+    @property
+    def control_stride(self) -> int:
+        """Samples from one control tick of the closed loop to the next (1 steering on the truth)."""
+        if self.follow == Follow.TRUTH:
+            return 1
+        return round(self.run.rate_hz / self.control_rate_hz)
+
+    @property
+    def injected_faults(self) -> tuple[str, ...]:
+        """What the scenario declares that breaks the guarantee's assumptions (a world that
+        differs from the map, a robot moved without odometry, failed sonars): the names of
+        those keys, empty for none."""
+        declared = {
+            "world.obstacles": bool(self.obstacles),
+            "events kidnap": bool(self.kidnaps),
+            "events sonar_failure": bool(self.sonar_failures),
+        }
+        return tuple(name for name, present in declared.items() if present)
 
     def __post_init__(self) -> None:
         if self.follow != Follow.TRUTH and not isinstance(self.plan, Route):
@@ -417,12 +495,31 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         float(wrap_angle(math.radians(heading_deg))),
     )
     _check_start(robot_table, segment_map, start_pose, robot)
+    obstacles = _read_world(top.take_table("world"), segment_map, start_pose, robot)
     route_table = top.take_table("route")
-    follow = Follow(route_table.take_str("follow", str(Follow.TRUTH), choices=choices(Follow)))
+    given_follow = route_table.take_str("follow", None, choices=choices(Follow))
+    safety_margin_m = route_table.take_float(
+        "safety_margin_m", DEFAULT_SAFETY_MARGIN_M, bounds=SAFETY_MARGIN_BOUNDS
+    )
+    control_rate_hz = route_table.take_float(
+        "control_rate_hz", DEFAULT_CONTROL_RATE_HZ, bounds=CONTROL_RATE_BOUNDS
+    )
+    ratio = run.rate_hz / control_rate_hz
+    if ratio < 1.0 - RATE_RATIO_TOL or abs(ratio - round(ratio)) > RATE_RATIO_TOL:
+        raise route_table.error(
+            "control_rate_hz",
+            f"must divide the simulation rate (run.rate_hz = {run.rate_hz:g} Hz) a whole number "
+            f"of times, got {control_rate_hz:g}",
+        )
     plan = _read_route(route_table, segment_map, robot)
+    follow = default_follow(plan) if given_follow is None else Follow(given_follow)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
-    estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar)
-    kidnaps = _read_events(top.take_tables("events"), segment_map, robot, run)
+    estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar, follow)
+    if given_follow is None and estimation.estimator == Estimator.MCL:
+        follow = Follow.TRUTH  # the closed loop steers on the interval pipeline's estimate
+    kidnaps, failures = _read_events(
+        top.take_tables("events"), segment_map, robot, run, obstacles, start_pose, sensors.sonar
+    )
     top.finish()
     return ScenarioSpec(
         name=name,
@@ -437,6 +534,10 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
         estimation=estimation,
         follow=follow,
         kidnaps=kidnaps,
+        obstacles=obstacles,
+        sonar_failures=failures,
+        safety_margin_m=safety_margin_m,
+        control_rate_hz=control_rate_hz,
     )
 
 
@@ -544,28 +645,139 @@ def _check_start(
         raise table.error("start_xy_m", str(exc)) from None
 
 
+def _read_world(
+    table: Table,
+    segment_map: SegmentMap,
+    start_pose: tuple[float, float, float],
+    robot: RobotParams,
+) -> Obstacles:
+    """``[world] obstacles`` (module docstring), each checked: a valid shape, inside the
+    map's outer wall (or its bounds) over its whole sweep, a moving one crossing no wall,
+    clear of the robot's start footprint."""
+    items = []
+    for entry in table.take_tables("obstacles"):
+        kinds = [key for key in ("polygon_m", "segment_m") if entry.has(key)]
+        if len(kinds) != 1:
+            raise entry.error(
+                kinds[1] if kinds else "polygon_m",
+                "give exactly one of polygon_m or segment_m",
+            )
+        shape_key = kinds[0]
+        polygon = shape_key == "polygon_m"
+        vertices = entry.take_array(shape_key, (None, 2) if polygon else (2, 2))
+        path = entry.take_array("path_m", (None, 2), np.zeros((0, 2)))
+        speed = entry.take_float("speed_m_s", None, bounds=declared_bounds(Obstacle, "speed_m_s"))
+        loop = entry.take_bool("loop", False)
+        entry.finish()
+        given = {} if speed is None else {"speed_m_s": speed}
+        try:
+            obstacle = Obstacle(vertices, polygon=polygon, path_m=path, loop=loop, **given)
+        except RobotsimError as exc:
+            raise entry.error("loop" if loop and not len(path) else shape_key, str(exc)) from None
+        _check_obstacle(entry, shape_key, obstacle, segment_map, start_pose, robot)
+        items.append(obstacle)
+    table.finish()
+    return Obstacles(tuple(items))
+
+
+def _check_obstacle(
+    entry: Table,
+    shape_key: str,
+    obstacle: Obstacle,
+    segment_map: SegmentMap,
+    start_pose: tuple[float, float, float],
+    robot: RobotParams,
+) -> None:
+    """An obstacle inside the map (its whole sweep), a moving one through no wall, and
+    clear of the start footprint (the simulator's clearance: radius plus wall thickness)."""
+    key = "path_m" if obstacle.moving else shape_key
+    swept = obstacle.swept()
+    if segment_map.boundary is not None:
+        room = shapely.Polygon(segment_map.boundary)
+    else:
+        (x_lo, y_lo), (x_hi, y_hi) = segment_map.bounds
+        room = shapely.box(x_lo, y_lo, x_hi, y_hi)
+    if not room.covers(swept):
+        where = "moves outside" if obstacle.moving else "lies outside"
+        raise entry.error(key, f"{where} the map's outer wall (or its bounds)")
+    if obstacle.moving:
+        walls = shapely.linestrings(segment_map.segments)
+        crossed = np.flatnonzero(shapely.intersects(walls, swept))
+        if crossed.size:
+            raise entry.error(key, f"the moving obstacle crosses wall segment {int(crossed[0])}")
+    needed = robot.radius_m + WorldParams().wall_radius_m
+    gap = shapely.distance(shapely.Point(start_pose[:2]), obstacle.geometry(0.0))
+    if gap < needed:
+        raise entry.error(
+            shape_key,
+            f"overlaps the robot's start footprint at ({start_pose[0]:g}, {start_pose[1]:g}) "
+            f"(clearance {gap:.3f} m < {needed:.3f} m)",
+        )
+
+
 def _read_events(
-    tables: list[Table], segment_map: SegmentMap, robot: RobotParams, run: RunSpec
-) -> tuple[KidnapEvent, ...]:
-    """The ``[[events]]`` entries (module docstring), checked: a time inside the run, a free
-    pose (the simulator's own check), one kidnap per sample."""
+    tables: list[Table],
+    segment_map: SegmentMap,
+    robot: RobotParams,
+    run: RunSpec,
+    obstacles: Obstacles,
+    start_pose: tuple[float, float, float],
+    sonar: SonarBeltParams,
+) -> tuple[tuple[KidnapEvent, ...], tuple[SonarFailure, ...]]:
+    """The ``[[events]]`` entries (module docstring), checked: a time inside the run; for a
+    kidnap a free pose at that time (the simulator's own check), one kidnap per sample; for
+    a sonar failure a window of positive length, sensors of the belt, a range it can read."""
     kidnaps: dict[int, KidnapEvent] = {}
+    failures = []
+    world = World(segment_map, robot, start_pose, obstacles=obstacles)
     for table in tables:
-        EventKind(table.take_str("kind", choices=choices(EventKind)))
+        kind = EventKind(table.take_str("kind", choices=choices(EventKind)))
         t_s = table.take_float("t_s", above=0.0, maximum=run.duration_s)
+        if kind == EventKind.SONAR_FAILURE:
+            failures.append(_read_failure(table, t_s, sonar))
+            continue
         xy = table.take_array("xy_m", (2,))
         heading_deg = table.take_float("heading_deg", 0.0)
         table.finish()
         pose = (float(xy[0]), float(xy[1]), float(wrap_angle(math.radians(heading_deg))))
+        sample = math.ceil(t_s * run.rate_hz - 1e-9)  # the simulator's rule
         try:
-            World(segment_map, robot, pose)
+            world.check_free(pose, t_s=sample / run.rate_hz)
         except RobotsimError as exc:
             raise table.error("xy_m", str(exc)) from None
-        sample = math.ceil(t_s * run.rate_hz - 1e-9)  # the simulator's rule
         if sample in kidnaps:
             raise table.error("t_s", f"another kidnap falls on the same sample ({sample})")
         kidnaps[sample] = KidnapEvent(t_s, pose)
-    return tuple(kidnaps[sample] for sample in sorted(kidnaps))
+    ordered = tuple(kidnaps[sample] for sample in sorted(kidnaps))
+    return ordered, tuple(sorted(failures, key=lambda f: f.start_s))
+
+
+def _read_failure(table: Table, t_s: float, sonar: SonarBeltParams) -> SonarFailure:
+    """A ``sonar_failure`` event: ``duration_s``, ``sensors`` and ``reading_m``."""
+    duration_s = table.take_float("duration_s", above=0.0)
+    raw = table.take_raw("sensors", "all")
+    if raw == "all":
+        sensors = tuple(range(sonar.count))
+    else:
+        if (
+            not isinstance(raw, list)
+            or not raw
+            or not all(isinstance(i, int) and not isinstance(i, bool) for i in raw)
+        ):
+            raise table.error(
+                "sensors", f'must be "all" or a non-empty array of integers, got {raw!r}'
+            )
+        bad = [i for i in raw if not 0 <= i < sonar.count]
+        if bad:
+            raise table.error(
+                "sensors", f"sensor {bad[0]} is not on the belt (indices 0 to {sonar.count - 1})"
+            )
+        if len(set(raw)) != len(raw):
+            raise table.error("sensors", f"a sensor is named twice: {raw}")
+        sensors = tuple(raw)
+    reading = table.take_float("reading_m", None, minimum=0.0, maximum=sonar.d_max_m)
+    table.finish()
+    return SonarFailure(t_s, t_s + duration_s, sensors, math.inf if reading is None else reading)
 
 
 def _read_route(table: Table, segment_map: SegmentMap, robot: RobotParams) -> Plan:
@@ -663,11 +875,15 @@ def _read_sonar(table: Table, robot: RobotParams, run: RunSpec) -> SonarBeltPara
     return sonar
 
 
-def _read_estimation(table: Table, robot: RobotParams, sonar: SonarBeltParams) -> EstimationSpec:
-    """The ``[estimation]`` table, checked against the robot and the sonar belt it will read."""
+def _read_estimation(
+    table: Table, robot: RobotParams, sonar: SonarBeltParams, follow: Follow
+) -> EstimationSpec:
+    """The ``[estimation]`` table, checked against the robot and the sonar belt it will read
+    (``follow``: the pose the controller steers on, for the default fusion rule)."""
     limits = TrackerSettings(v_max_m_s=robot.v_max_m_s, omega_max_rad_s=robot.omega_max_rad_s)
     own_defaults = EstimationSpec(
         intervals=limits,
+        fusion=default_fusion(follow),
         interval_rate_hz=sonar.rate_hz,
         free_space=sonar.lost_echo_prob == 0.0,
     )

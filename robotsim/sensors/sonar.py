@@ -43,8 +43,8 @@ def _cone_distances_block(
     s_x: np.ndarray, s_y: np.ndarray, phi: np.ndarray, a: np.ndarray, e: np.ndarray, gamma: float
 ) -> np.ndarray:
     """Cone distances ``(n, k)`` for sensor positions/axes ``(n, k, 1)`` and segments
-    ``a`` (start) and ``e = b - a`` (each ``(m, 2)``)."""
-    a_x, a_y, e_x, e_y = a[:, 0], a[:, 1], e[:, 0], e[:, 1]
+    ``a`` (start) and ``e = b - a`` (each ``(m, 2)``, or ``(n, 1, m, 2)``: per pose)."""
+    a_x, a_y, e_x, e_y = a[..., 0], a[..., 1], e[..., 0], e[..., 1]
     cos_gamma = np.cos(gamma)
     c_x, c_y = np.cos(phi), np.sin(phi)
     # offsets from the sensor to the segment start, (n, k, m)
@@ -87,7 +87,8 @@ def cone_distances(
 
     Args:
         poses: ``(..., 3)`` robot poses ``(x_m, y_m, theta_rad)``, world frame.
-        segments: ``(m, 2, 2)`` map segments, metres, world frame.
+        segments: ``(m, 2, 2)`` map segments, metres, world frame; or ``(n, m, 2, 2)``, the
+            segments seen from each of ``n`` poses (``poses (n, 3)``: a world that moves).
         mount_xy: ``(k, 2)`` sensor positions, robot frame, metres.
         mount_angle_rad: ``(k,)`` sensor axis angles, robot frame.
         half_aperture_rad: cone half-angle gamma, ``0 < gamma < pi/2``.
@@ -105,8 +106,13 @@ def cone_distances(
     mount_angle_rad = np.asarray(mount_angle_rad, dtype=np.float64)
     if poses.shape[-1:] != (3,):
         raise RobotsimError(f"poses must have shape (..., 3), got {poses.shape}")
-    if segments.ndim != 3 or segments.shape[1:] != (2, 2):
+    per_pose = segments.ndim == 4
+    if segments.shape[-2:] != (2, 2) or segments.ndim not in (3, 4):
         raise RobotsimError(f"segments must have shape (m, 2, 2), got {segments.shape}")
+    if per_pose and (poses.ndim != 2 or len(segments) != len(poses)):
+        raise RobotsimError(
+            f"per-pose segments (n, m, 2, 2) need poses (n, 3), got {segments.shape} and {poses.shape}"
+        )
     if (
         mount_xy.ndim != 2
         or mount_xy.shape[1] != 2
@@ -121,14 +127,14 @@ def cone_distances(
 
     batch_shape = poses.shape[:-1]
     flat = poses.reshape(-1, 3)
-    k, m = len(mount_angle_rad), len(segments)
+    k, m = len(mount_angle_rad), segments.shape[-3]
     x, y, theta = (flat[:, i, None] for i in range(3))  # (n, 1)
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     # s_i = (x, y) + R(theta) s~_i, axis phi_i = theta + theta~_i; shapes (n, k, 1)
     s_x = (x + cos_t * mount_xy[:, 0] - sin_t * mount_xy[:, 1])[..., None]
     s_y = (y + sin_t * mount_xy[:, 0] + cos_t * mount_xy[:, 1])[..., None]
     phi = (theta + mount_angle_rad)[..., None]
-    a, e = segments[:, 0], segments[:, 1] - segments[:, 0]
+    a, e = segments[..., 0, :], segments[..., 1, :] - segments[..., 0, :]
 
     out = np.full((len(flat), k), np.inf)
     if m == 0:
@@ -136,7 +142,10 @@ def cone_distances(
     block = max(1, _BLOCK_ELEMENTS // max(1, k * m))
     for start in range(0, len(flat), block):
         rows = slice(start, start + block)
-        out[rows] = _cone_distances_block(s_x[rows], s_y[rows], phi[rows], a, e, half_aperture_rad)
+        a_rows, e_rows = (a[rows, None], e[rows, None]) if per_pose else (a, e)
+        out[rows] = _cone_distances_block(
+            s_x[rows], s_y[rows], phi[rows], a_rows, e_rows, half_aperture_rad
+        )
     return out.reshape(*batch_shape, k)
 
 

@@ -5,7 +5,8 @@
 Writes ``<folder>/<name>.png`` for each built-in scenario (default: all of them), drawn
 from the map the scenario loads (``robotsim.maps.SegmentMap``: every segment as a wall),
 its route (the waypoints from the start, closed when it loops) and its start pose, with
-the sonar's reach ``d_max`` drawn round the start for scale. All the files are written or
+the sonar's reach ``d_max`` drawn round the start for scale; the unmapped obstacles of
+``[world]`` in orange where they start, a moving one's sweep shaded. All the files are written or
 none (``scenarios.outputs.atomic_paths``); other files in the folder are left alone.
 """
 
@@ -58,6 +59,17 @@ def draw(spec: ScenarioSpec, path: Path) -> None:
         axes.add_patch(Polygon(segment_map.boundary, closed=True, color="#f3f1ea", zorder=0))
     walls = LineCollection(list(segment_map.segments), colors="#222222", linewidths=1.4, zorder=2)
     axes.add_collection(walls)
+    for obstacle in spec.obstacles.items:
+        if obstacle.moving:
+            swept = obstacle.swept()
+            for part in getattr(swept, "geoms", [swept]):
+                axes.add_patch(
+                    Polygon(np.array(part.exterior.coords), color="#ff7f0e", alpha=0.25, zorder=1)
+                )
+        if obstacle.polygon:
+            axes.add_patch(Polygon(obstacle.vertices_m, closed=True, color="#ff7f0e", zorder=2))
+        else:
+            axes.plot(*obstacle.vertices_m.T, color="#ff7f0e", linewidth=2.0, zorder=2)
     route = route_points(spec)
     axes.plot(*route.T, color="#1f77b4", linewidth=1.0, zorder=3)
     axes.plot(*route[1:].T, "o", color="#1f77b4", markersize=2.5, zorder=3)
@@ -82,7 +94,8 @@ def draw(spec: ScenarioSpec, path: Path) -> None:
     axes.set_ylabel("y (m)")
     axes.set_title(
         f"{spec.name}: {x1 - x0:g} x {y1 - y0:g} m, {len(segment_map.segments)} segments\n"
-        f"blue: route; red: start pose and the sonar's {reach:g} m reach",
+        f"blue: route; red: start pose and the sonar's {reach:g} m reach"
+        + ("; orange: unmapped obstacles, a moving one's sweep shaded" if spec.obstacles else ""),
         fontsize=9,
     )
     figure.savefig(path, format="png", bbox_inches="tight")

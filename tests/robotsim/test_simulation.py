@@ -55,6 +55,7 @@ def test_log_layout_matches_the_contract():
         "sonar_true_range_m": (m, k),
         "kidnap_t_s": (0,),
         "wall_contact": (n,),
+        "obstacle_contact": (n,),
     }
     assert {name: a.shape for name, a in arrays(log).items()} == expected
     assert log.rate_hz == 100.0

@@ -74,8 +74,10 @@ def wall_distance_m(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("name", builtin_names())
 def test_every_builtin_scenario_loads_with_a_closed_outer_wall_and_a_route(name):
     spec = load_scenario(name)
-    # named after its map (hall_mcl: the hall localised by the particle filter)
-    assert spec.name == name and name.split("_mcl")[0] == spec.map.name
+    # named after its map: hall_mcl is the hall localised by the particle filter; a plan with
+    # unmapped obstacles is the plan of its name's first word, lived in
+    plan = name.split("_")[0] if spec.obstacles else name.split("_mcl")[0]
+    assert spec.name == name and spec.map.name == plan
     assert spec.map.boundary is not None
     assert isinstance(spec.plan, Route) and len(spec.plan.waypoints_m) >= 2
 
@@ -92,6 +94,10 @@ def test_start_and_route_lie_in_free_space_clear_of_every_wall(name):
     distance = wall_distance_m(points, segments)
     worst = int(np.argmin(distance))
     assert distance[worst] >= clearance, f"{name}: {points[worst]} is {distance[worst]:.3f} m off"
+    # and of every unmapped obstacle, wherever a moving one goes (the robot does not swerve)
+    for obstacle in spec.obstacles.items:
+        gap = shapely.distance(obstacle.swept(), shapely.points(points))
+        assert gap.min() >= clearance, f"{name}: the route passes {gap.min():.3f} m off an obstacle"
 
 
 @pytest.mark.parametrize("name", sorted(set(builtin_names()) - set(OPEN_PLANS)))

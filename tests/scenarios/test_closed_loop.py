@@ -27,9 +27,10 @@ class Recorder(Steering):
         super().__init__(localizer, branch)
         self.samples, self.scans, self.poses = [], [], []
 
-    def odometry(self, t_s, ticks, gyro_rad_s, accel_m_s2):
-        self.samples.append((t_s, np.array(ticks), gyro_rad_s, np.array(accel_m_s2)))
-        super().odometry(t_s, ticks, gyro_rad_s, accel_m_s2)
+    def odometry_block(self, t_s, ticks, gyro_rad_s, accel_m_s2):
+        for row in zip(t_s, ticks, gyro_rad_s, accel_m_s2, strict=True):
+            self.samples.append(tuple(np.array(value) for value in row))
+        super().odometry_block(t_s, ticks, gyro_rad_s, accel_m_s2)
 
     def scan(self, t_s, readings_m):
         self.scans.append((t_s, np.array(readings_m)))
@@ -57,9 +58,13 @@ def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
     online, _ = gathered(localizer, log)
     after, _ = estimate(spec, log)
     np.testing.assert_array_equal(online.pose, after.pose)
-    # the controller was fed the fused estimate one sample late (the first: the start pose)
-    assert len(observer.poses) == len(log.t_s) - 1  # no step follows the last sample
-    np.testing.assert_array_equal(observer.poses[1:], online.pose[FUSED, :-2])
+    # the controller was fed the fused estimate at its ticks (every 10 samples at 10 Hz), one
+    # sample late (the first: the start pose)
+    stride = spec.control_stride
+    assert stride == 10
+    ticks = np.arange(0, len(log.t_s) - 1, stride)  # no step follows the last sample
+    assert len(observer.poses) == len(ticks)
+    np.testing.assert_array_equal(observer.poses[1:], online.pose[FUSED, ticks[1:] - 1])
     np.testing.assert_allclose(observer.poses[0], spec.start_pose)
     # and it matters: the true path differs from the run steered on the truth
     truth = simulate_spec(dataclasses.replace(spec, follow=Follow.TRUTH))
@@ -78,6 +83,23 @@ def test_steering_on_the_fused_estimate_keeps_the_guarantee_and_the_route(name, 
     assert route["follow"] == "estimate"
     assert route["waypoints_reached"] >= on_truth["route"]["waypoints_reached"] - 1 >= 1
     assert route["path_error_m"]["max"] < 0.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_steering_on_the_ukf_only_branch_drifts_off_the_route_on_a_long_run(seed):
+    # five minutes of hall: the dead reckoning alone drifts by decimetres, the fused branch
+    # stays within centimetres; a robot steered on each follows its route as well as that
+    fused = run_scenario(closed("hall", Follow.ESTIMATE, seed, duration_s=300.0)).summary
+    alone = run_scenario(closed("hall", Follow.UKF_ONLY, seed, duration_s=300.0)).summary
+    assert fused["containment"] == 1.0 and fused["walls"]["pymunk_contact_steps"] == 0
+    assert fused["route"]["path_error_m"]["max"] < 0.3
+    assert alone["route"]["follow"] == "ukf_only"
+    assert alone["route"]["path_error_m"]["max"] > 2.0 * fused["route"]["path_error_m"]["max"]
+    assert alone["route"]["path_error_m"]["mean"] > 3.0 * fused["route"]["path_error_m"]["mean"]
+    assert alone["rmse_position_m"]["ukf_only"] > 5.0 * fused["rmse_position_m"]["fused"]
+    # the steering branch's error is the path's: the sets still hold the truth
+    assert alone["containment"] == 1.0
 
 
 def test_route_stats_against_a_direct_computation():

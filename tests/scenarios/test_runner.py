@@ -12,7 +12,7 @@ from intervals.errors import IntervalError
 from scenarios.errors import ScenarioError
 from scenarios.metrics import summarize
 from scenarios.runner import BRANCHES, run_scenario, simulate_spec
-from scenarios.spec import builtin_names, load_scenario
+from scenarios.spec import Follow, builtin_names, load_scenario
 
 
 @pytest.fixture(scope="module")
@@ -31,13 +31,21 @@ def test_same_scenario_and_seed_give_the_same_summary_and_log(hall_runs):
     assert with_timing["timing"]["realtime_factor"] == pytest.approx(20.0 / 0.5)
 
 
-def test_another_seed_changes_the_sensors_but_not_the_truth(hall_runs):
+def test_another_seed_changes_the_sensors_and_through_the_estimate_the_path(hall_runs):
     first, _, other = hall_runs
     assert other.summary["seed"] == 1
     assert other.summary["sensors"] != first.summary["sensors"]
-    # the noise does not steer the robot (the controller sees the true pose)
-    np.testing.assert_array_equal(first.log.pose, other.log.pose)
+    # the built-in scenarios steer on the fused estimate (the file's default follow), so
+    # the noise steers the robot a little
+    assert first.summary["route"]["follow"] == "estimate"
+    assert not np.array_equal(first.log.pose, other.log.pose)
+    assert np.abs(first.log.pose[:, :2] - other.log.pose[:, :2]).max() < 0.2
     assert not np.array_equal(first.log.gyro_rad_s, other.log.gyro_rad_s)
+    # steering on the truth, it does not
+    truth = dataclasses.replace(load_scenario("hall").with_run(duration_s=5.0), follow=Follow.TRUTH)
+    np.testing.assert_array_equal(
+        simulate_spec(truth).pose, simulate_spec(truth.with_run(seed=1)).pose
+    )
 
 
 def test_summary_figures_match_the_log(hall_runs):
