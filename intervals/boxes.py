@@ -113,9 +113,12 @@ def _shift_turns(boxes: np.ndarray, turns: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def unwrap_headings(boxes: np.ndarray, reference_rad: float, axis: int = 2) -> np.ndarray:
+def unwrap_headings(
+    boxes: np.ndarray, reference_rad: float | np.ndarray, axis: int = 2
+) -> np.ndarray:
     """The same poses, each box moved by whole turns in heading so that its centre lies within
-    ``pi`` of ``reference_rad`` (lets the hull of a set span the +-pi cut tightly)."""
+    ``pi`` of ``reference_rad`` (one for all, or one per box ``(N,)``; lets the hull of a set
+    span the +-pi cut tightly)."""
     centre = (boxes[:, axis, 0] + boxes[:, axis, 1]) / 2.0
     return _shift_turns(boxes, np.round((centre - reference_rad) / (2.0 * np.pi)), axis)
 
@@ -327,6 +330,26 @@ def connected_components(
     rank = np.empty(first_box.size, dtype=np.int64)
     rank[np.argsort(first_box, kind="stable")] = np.arange(first_box.size)
     return int(count), rank[inverse]
+
+
+def component_hulls(boxes: np.ndarray, periodic_axis: int | None = 2) -> np.ndarray:
+    """The hull of each connected component of the boxes ``(N, d, 2)`` (N >= 1): ``(C, d, 2)``
+    in the order of :func:`connected_components`, whose union holds the boxes. With a
+    ``periodic_axis`` (the heading) each component's boxes are first moved by whole turns
+    next to its first box (:func:`unwrap_headings`), so a component across the +-pi cut keeps a
+    narrow interval there (possibly beyond ``pi``; a component round the whole circle gets a
+    hull at least ``2 pi`` wide)."""
+    count, labels = connected_components(boxes, periodic_axis)
+    if periodic_axis is not None:
+        first = np.empty(count, dtype=np.int64)
+        first[labels[::-1]] = np.arange(labels.size)[::-1]  # each component's first box
+        own = boxes[first[labels], periodic_axis]
+        boxes = unwrap_headings(boxes, (own[:, 0] + own[:, 1]) / 2.0, periodic_axis)
+    order = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[order], np.arange(count))
+    lo = np.minimum.reduceat(boxes[order, :, 0], starts, axis=0)
+    hi = np.maximum.reduceat(boxes[order, :, 1], starts, axis=0)
+    return np.stack([lo, hi], axis=-1)
 
 
 @dataclass(frozen=True)

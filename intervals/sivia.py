@@ -1,4 +1,4 @@
-"""SIVIA, breadth-first (Set Inversion Via Interval Analysis; paper 002 section 3.1, eq. 6-7).
+"""SIVIA, level by level (Set Inversion Via Interval Analysis; paper 002 section 3.1, eq. 6-7).
 
 Characterise ``X = {x in [x0] : t(x) holds}`` by two subpavings ``inner ⊂ X ⊂ inner ∪ boundary``.
 A *test* decides boxes: :data:`INSIDE` (every point satisfies the constraints), :data:`OUTSIDE`
@@ -9,6 +9,7 @@ the undecided ones no wider than ``eps`` as boundary and bisects the rest (headi
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Callable
 from enum import IntEnum
 
@@ -28,20 +29,31 @@ class Verdict(IntEnum):
 
 OUTSIDE, INSIDE, UNDECIDED = Verdict.OUTSIDE, Verdict.INSIDE, Verdict.UNDECIDED
 
-BoxTest = Callable[[np.ndarray], np.ndarray]
-"""``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values."""
+BoxTest = Callable[[np.ndarray], np.ndarray | tuple[np.ndarray, np.ndarray]]
+"""``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values, or ``(verdicts, scores
+(N,))``: a score per box, lower for the boxes to refine first under a budget (e.g. the number
+of sensors rejecting the box; see :func:`sivia`'s ``max_tested``)."""
 
 DEFAULT_MAX_BOXES = 200_000
 """Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
 
 
-def _verdicts(test: BoxTest, boxes: np.ndarray) -> np.ndarray:
-    v = np.asarray(test(boxes))
-    if v.shape != (boxes.shape[0],):
-        raise IntervalError(f"SIVIA test returned shape {v.shape}, expected ({boxes.shape[0]},)")
+def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The test's ``(verdicts (N,), scores (N,))`` (scores 0 when the test gives none)."""
+    out = test(boxes)
+    v, scores = out if isinstance(out, tuple) else (out, None)
+    v = np.asarray(v)
+    n = boxes.shape[0]
+    if v.shape != (n,):
+        raise IntervalError(f"SIVIA test returned shape {v.shape}, expected ({n},)")
     if np.any((v < OUTSIDE) | (v > UNDECIDED)):
         raise IntervalError("SIVIA test returned a value other than OUTSIDE, INSIDE, UNDECIDED")
-    return v
+    scores = np.zeros(n) if scores is None else np.asarray(scores, dtype=np.float64)
+    if scores.shape != (n,) or not np.all(np.isfinite(scores)):
+        raise IntervalError(
+            f"SIVIA test scores must be {n} finite numbers, got shape {scores.shape}"
+        )
+    return v, scores
 
 
 def _split(boxes: np.ndarray, eps: float, scale, times: int) -> np.ndarray:
@@ -93,7 +105,13 @@ def sivia(
     chunk would exceed it, SIVIA stops and keeps every box not yet decided as a boundary box
     (possibly wider than ``eps``; each lies in a box the test left undecided, so the outer
     approximation still holds ``X``), and the subpaving is marked ``coarse``: a sound, coarser
-    cover in bounded time, never an error.
+    cover in bounded time, never an error. Under this budget the frontier is refined best
+    first rather than depth first: the children of the undecided boxes of lowest score (the
+    test's second output, e.g. the sensors rejecting them) first, and among equal scores the
+    shallowest (fewest bisections from ``initial``) first, so that the budget is spent on the
+    most promising boxes and the boxes it leaves whole are few and of even size: a cover the
+    next call (a later epoch) refines. The boxes and verdicts are the same in any order; only
+    where the budget cuts differs.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -128,26 +146,44 @@ def sivia(
     if first:
         small = max_width(boxes, scale) <= eps
         boxes = np.concatenate([boxes[small], _split(boxes[~small], eps, scale, first)])
-    pending, tested, coarse = [boxes], 0, False  # frontiers still to test, the last first
+    # the frontiers still to test, a heap keyed (score, depth, order): without a budget every
+    # key is (0, 0, -order), the last frontier first (depth first: few frontiers held)
+    pending: list[tuple[float, int, int, np.ndarray]] = [(0.0, 0, 0, boxes)]
+    best_first = max_tested is not None
+    tested, coarse, order = 0, False, 0
+
+    def push(score: float, depth: int, frontier: np.ndarray) -> None:
+        nonlocal order
+        order += 1
+        key = (score, depth, order) if best_first else (0.0, 0, -order)
+        heapq.heappush(pending, (*key, frontier))
+
     while pending:
-        boxes = pending.pop()
-        if boxes.shape[0] > max_boxes:  # equal chunks, the first on top
-            pending.extend(np.array_split(boxes, -(-boxes.shape[0] // max_boxes))[::-1])
+        score, depth, _, boxes = heapq.heappop(pending)
+        if boxes.shape[0] > max_boxes:  # equal chunks, the first tested first
+            chunks = np.array_split(boxes, -(-boxes.shape[0] // max_boxes))
+            for chunk in chunks if best_first else chunks[::-1]:
+                push(score, depth, chunk)
             continue
         if max_tested is not None and tested + boxes.shape[0] > max_tested:
-            boundary.extend([boxes, *pending])  # undecided, kept whole: a coarser cover
+            # undecided, kept whole: a coarser cover
+            boundary.extend([boxes, *(frontier for *_, frontier in pending)])
             coarse = True
             break
         tested += boxes.shape[0]
-        v = _verdicts(test, boxes)
+        v, scores = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
-        undecided = boxes[v == UNDECIDED]
-        small = max_width(undecided, scale) <= eps
-        boundary.append(undecided[small])
-        wide = undecided[~small]
-        if wide.shape[0]:
-            splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-            pending.append(_split(wide, eps, scale, splits))
+        undecided = v == UNDECIDED
+        small = max_width(boxes, scale) <= eps
+        boundary.append(boxes[undecided & small])
+        wide = undecided & ~small
+        if not wide.any():
+            continue
+        splits = max(splits_per_level, _extra_splits(boxes[wide], min_level_boxes))
+        # one frontier per score (one in all without a budget), its boxes in their order
+        for value in np.unique(scores[wide]) if best_first else (0.0,):
+            group = wide & (scores == value) if best_first else wide
+            push(float(value), depth + 1, _split(boxes[group], eps, scale, splits))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,

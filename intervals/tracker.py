@@ -6,7 +6,10 @@ at most ``v_max dt`` and turned at most ``omega_max dt``) and contracted by the 
 Two predictions are offered (docs/models.md section 4):
 
 * ``"sivia"``: the hull of the previous outer boxes, inflated by the limits, inverted as one
-  box;
+  box; when the set is spread (its hull more than :data:`SPREAD_FACTOR` times its volume, as
+  a repetitive map's several candidate places) or coarse, the hull of each connected
+  component of its boxes no wider than ``eps`` and each wider box (left whole by the budget)
+  alone, so that the next epoch refines a coarse cover instead of re-paving its hull;
 * ``"imagesp"``: every previous box mapped through the motion inclusion function (by default
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
@@ -36,18 +39,27 @@ import numpy as np
 from intervals.boxes import (
     Subpaving,
     as_boxes,
+    component_hulls,
     hull,
     inflate,
+    max_width,
     pose_scale,
     unwrap_headings,
+    volume,
     wrap_headings,
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen, imagesp
-from intervals.localize import TESTS_PER_BOX, gomne
+from intervals.localize import GLOBAL_SPLITS_PER_LEVEL, TESTS_PER_BOX, gomne
 from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarScan
 from validated_records import bounded, validate_fields
+
+#: The ``"sivia"`` prediction predicts each connected component (and each box wider than
+#: ``eps``) apart when the hull of the previous set is more than this many times the set's
+#: volume; below, it predicts the hull (one component, compact: the hull is then about as
+#: tight and costs no component search).
+SPREAD_FACTOR = 8.0
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
@@ -129,6 +141,24 @@ class TrackerSettings:
 
 
 @dataclass(frozen=True)
+class Refinement:
+    """The finer set behind an epoch whose reported set is coarse, for the next epochs.
+
+    ``scan``: the scan it was paved on; ``paving``: its cover of the poses consistent with
+    that scan, with up to ``TESTS_PER_BOX * max_boxes`` boxes (all SIVIA refined within its
+    budget, before the merge that brings the reported set down to ``max_boxes``);
+    ``age_s``: seconds from that scan to the epoch that returned it. While ``paving`` is
+    coarse, each next epoch first continues its paving on its own ``scan`` (the same instant:
+    no motion to add, so every budget spent refines it), then predicts from it over
+    ``age_s`` plus the epoch's ``dt_s``; an epoch whose own set is fine drops it. Held by the
+    caller between epochs (:meth:`IntervalTracker.step`), never logged."""
+
+    scan: SonarScan
+    paving: Subpaving
+    age_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class EpochResult:
     """Outcome of one tracker epoch.
 
@@ -137,7 +167,9 @@ class EpochResult:
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
     ``guaranteed``); ``status``: an :class:`EpochStatus`; ``elapsed_s``: wall time of the
     epoch (timing, not a result); ``coarse``: the budget (``max_boxes``) cut the epoch's
-    paving short or merged its boxes: the set is a coarser sound cover.
+    paving short or merged its boxes: the set is a coarser sound cover; ``refinement``: for a
+    coarse epoch, the finer set the next epoch continues from (:class:`Refinement`; pass it
+    to the next :meth:`IntervalTracker.step`, and drop it from results kept afterwards).
     """
 
     paving: Subpaving | None
@@ -145,6 +177,7 @@ class EpochResult:
     status: EpochStatus
     elapsed_s: float = 0.0
     coarse: bool = False
+    refinement: Refinement | None = None
 
     @property
     def consistent(self) -> bool:
@@ -209,6 +242,21 @@ class IntervalTracker:
         reach = s.v_max_m_s * dt_s
         return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
 
+    def groups(self, boxes: np.ndarray) -> np.ndarray:
+        """Boxes ``(M, 3, 2)`` whose union holds ``boxes (N, 3, 2)`` (headings unwrapped near
+        the first box), for the prediction: their hull when it is at most
+        :data:`SPREAD_FACTOR` times their volume and every box is no wider than ``eps_m``;
+        else each box wider than ``eps_m`` (a box the budget left whole or merged) alone and
+        the hull of each connected component of the others (:func:`component_hulls`)."""
+        s = self.settings
+        whole = hull(boxes)
+        wide = max_width(boxes, pose_scale(s.heading_scale_m_per_rad)) > s.eps_m
+        if not wide.any() and volume(whole[None]) <= SPREAD_FACTOR * volume(boxes):
+            return whole[None]
+        fine = boxes[~wide]
+        hulls = component_hulls(fine) if fine.shape[0] else fine
+        return np.concatenate([hulls, boxes[wide]])
+
     def predict(self, previous: Subpaving, dt_s: float) -> np.ndarray:
         """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``."""
         if not (np.isfinite(dt_s) and dt_s >= 0):
@@ -216,10 +264,10 @@ class IntervalTracker:
         boxes = previous.outer
         boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
         s = self.settings
-        if s.tracker == Tracker.SIVIA:
-            return wrap_headings(self.limits(hull(boxes)[None], dt_s))
-        motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
+        if s.tracker == Tracker.SIVIA:
+            return wrap_headings(self.limits(self.groups(boxes), dt_s))
+        motion = self.motion if self.motion is not None else self.limits
         try:
             cells = imagesp(
                 lambda b: motion(b, dt_s),
@@ -229,11 +277,11 @@ class IntervalTracker:
                 pitch=s.imagesp_pitch_m / scale,
                 max_cells=TESTS_PER_BOX * s.max_boxes,
             )
-        except IntervalError:  # more cells than the budget: the image of the hull, one box
-            cells = motion(hull(boxes)[None], dt_s)
+        except IntervalError:  # more cells than the budget: the image of the groups' hulls
+            cells = motion(self.groups(boxes), dt_s)
         return wrap_headings(cells)
 
-    def _search(self, scan: SonarScan, initial: np.ndarray):
+    def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3):
         s = self.settings
         return gomne(
             scan,
@@ -245,14 +293,36 @@ class IntervalTracker:
             engine=s.engine,
             ray_test=s.ray_test,
             max_boxes=s.max_boxes,
+            max_kept=TESTS_PER_BOX * s.max_boxes,
+            splits_per_level=splits_per_level,
         )
 
-    def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
+    def step(
+        self,
+        previous: Subpaving | None,
+        scan: SonarScan,
+        dt_s: float,
+        refinement: Refinement | None = None,
+    ) -> EpochResult:
         """One epoch from the previous set (None: the start, or the epoch after one without a
-        set: search globally), on the scan taken ``dt_s`` seconds after the previous one."""
+        set: search globally), on the scan taken ``dt_s`` seconds after the previous one.
+        ``refinement``: the previous result's (:class:`Refinement`; None when it had none):
+        the epoch then refines that set on its own scan and predicts from it instead of from
+        ``previous`` (its coarse, merged report)."""
         start = time.perf_counter()
+        pending = None
+        if refinement is not None and not refinement.paving.coarse:
+            previous, dt_s = refinement.paving, refinement.age_s + dt_s
+        elif refinement is not None:
+            older = self._search(refinement.scan, refinement.paving.outer)
+            if older.consistent:  # else (budget-free test of a sound cover): search globally
+                previous, dt_s = older.paving, refinement.age_s + dt_s
+                if older.paving.coarse:
+                    pending = Refinement(refinement.scan, older.paving, dt_s)
+            else:
+                previous = None
         if previous is None or previous.is_empty:
-            found = self._search(scan, global_box(self.map_bounds))
+            found = self._search(scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL)
             status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
             found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
@@ -261,9 +331,16 @@ class IntervalTracker:
             return EpochResult(None, None, status, time.perf_counter() - start)
         s, coarse = self.settings, found.paving.coarse
         inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
-        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # boxes split at the +-pi cut
+        if not coarse and inner.shape[0] + boundary.shape[0] <= s.max_boxes:
+            pending = None  # a fine set, reported whole: an older refinement is done with
+        elif pending is None or not coarse:
+            # kept for the next epoch: this set, finer than the report merged to max_boxes
+            # (while an older refinement is still coarse, that one goes on instead)
+            pending = Refinement(scan, Subpaving(inner, boundary, coarse))
+        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # too many: merged for the report
             scale = pose_scale(s.heading_scale_m_per_rad)
             merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
             inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True
         paving = Subpaving(inner, boundary, coarse)
-        return EpochResult(paving, found.q, status, time.perf_counter() - start, coarse)
+        elapsed_s = time.perf_counter() - start
+        return EpochResult(paving, found.q, status, elapsed_s, coarse, pending)
