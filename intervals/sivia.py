@@ -1,4 +1,4 @@
-"""SIVIA, level by level (Set Inversion Via Interval Analysis; paper 002 section 3.1, eq. 6-7).
+"""SIVIA, breadth-first (Set Inversion Via Interval Analysis; paper 002 section 3.1, eq. 6-7).
 
 Characterise ``X = {x in [x0] : t(x) holds}`` by two subpavings ``inner ⊂ X ⊂ inner ∪ boundary``.
 A *test* decides boxes: :data:`INSIDE` (every point satisfies the constraints), :data:`OUTSIDE`
@@ -9,7 +9,6 @@ the undecided ones no wider than ``eps`` as boundary and bisects the rest (headi
 
 from __future__ import annotations
 
-import heapq
 from collections.abc import Callable
 from enum import IntEnum
 
@@ -105,13 +104,13 @@ def sivia(
     chunk would exceed it, SIVIA stops and keeps every box not yet decided as a boundary box
     (possibly wider than ``eps``; each lies in a box the test left undecided, so the outer
     approximation still holds ``X``), and the subpaving is marked ``coarse``: a sound, coarser
-    cover in bounded time, never an error. Under this budget the frontier is refined best
-    first rather than depth first: the children of the undecided boxes of lowest score (the
-    test's second output, e.g. the sensors rejecting them) first, and among equal scores the
-    shallowest (fewest bisections from ``initial``) first, so that the budget is spent on the
-    most promising boxes and the boxes it leaves whole are few and of even size: a cover the
-    next call (a later epoch) refines. The boxes and verdicts are the same in any order; only
-    where the budget cuts differs.
+    cover in bounded time, never an error. Under this budget the undecided boxes of a level
+    are bisected in the order of their scores (the test's second output, lowest first: e.g.
+    the fewest sensors rejecting them), so that the depth-first descent spends the budget on
+    the most promising boxes first, and what it leaves whole is mostly the boxes it never
+    reached, as they were: a later call on the same problem (a later epoch refining this
+    cover) starts where this one stopped instead of from a cover of finer, more numerous
+    boxes.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -146,44 +145,28 @@ def sivia(
     if first:
         small = max_width(boxes, scale) <= eps
         boxes = np.concatenate([boxes[small], _split(boxes[~small], eps, scale, first)])
-    # the frontiers still to test, a heap keyed (score, depth, order): without a budget every
-    # key is (0, 0, -order), the last frontier first (depth first: few frontiers held)
-    pending: list[tuple[float, int, int, np.ndarray]] = [(0.0, 0, 0, boxes)]
-    best_first = max_tested is not None
-    tested, coarse, order = 0, False, 0
-
-    def push(score: float, depth: int, frontier: np.ndarray) -> None:
-        nonlocal order
-        order += 1
-        key = (score, depth, order) if best_first else (0.0, 0, -order)
-        heapq.heappush(pending, (*key, frontier))
-
+    pending, tested, coarse = [boxes], 0, False  # frontiers still to test, the last first
     while pending:
-        score, depth, _, boxes = heapq.heappop(pending)
-        if boxes.shape[0] > max_boxes:  # equal chunks, the first tested first
-            chunks = np.array_split(boxes, -(-boxes.shape[0] // max_boxes))
-            for chunk in chunks if best_first else chunks[::-1]:
-                push(score, depth, chunk)
+        boxes = pending.pop()
+        if boxes.shape[0] > max_boxes:  # equal chunks, the first on top
+            pending.extend(np.array_split(boxes, -(-boxes.shape[0] // max_boxes))[::-1])
             continue
         if max_tested is not None and tested + boxes.shape[0] > max_tested:
-            # undecided, kept whole: a coarser cover
-            boundary.extend([boxes, *(frontier for *_, frontier in pending)])
+            boundary.extend([boxes, *pending[::-1]])  # undecided, kept whole: a coarser cover
             coarse = True
             break
         tested += boxes.shape[0]
         v, scores = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
-        undecided = v == UNDECIDED
-        small = max_width(boxes, scale) <= eps
-        boundary.append(boxes[undecided & small])
-        wide = undecided & ~small
-        if not wide.any():
-            continue
-        splits = max(splits_per_level, _extra_splits(boxes[wide], min_level_boxes))
-        # one frontier per score (one in all without a budget), its boxes in their order
-        for value in np.unique(scores[wide]) if best_first else (0.0,):
-            group = wide & (scores == value) if best_first else wide
-            push(float(value), depth + 1, _split(boxes[group], eps, scale, splits))
+        undecided = boxes[v == UNDECIDED]
+        small = max_width(undecided, scale) <= eps
+        boundary.append(undecided[small])
+        wide = undecided[~small]
+        if wide.shape[0]:
+            if max_tested is not None:  # under a budget, the lowest scores' children first
+                wide = wide[np.argsort(scores[v == UNDECIDED][~small], kind="stable")]
+            splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
+            pending.append(_split(wide, eps, scale, splits))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,
