@@ -123,10 +123,11 @@ def _pave(
     max_boxes,
     max_kept=None,
 ):
-    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,))`` with the number of
-    sensors rejecting each boundary box, kept from the SIVIA level that stored the box (the
-    boundary boxes are the undecided boxes no wider than ``eps``, in the order SIVIA met
-    them; checked, and recomputed if SIVIA ever stored them otherwise).
+    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
+    number of sensors rejecting each boundary box (``merged``: see below), kept from the
+    SIVIA level that stored the box (the boundary boxes are the undecided boxes no wider than
+    ``eps``, in the order SIVIA met them; checked, and recomputed if SIVIA ever stored them
+    otherwise).
 
     ``max_boxes`` (None: no budget): the budget of :func:`localize`. SIVIA may then test at
     most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes, best first (the boxes fewest sensors
@@ -135,8 +136,8 @@ def _pave(
     are tested once, in chunks, and those the test rejects are dropped (each rejection is
     sound for every pose of the box); only then, if the set still holds more than
     ``max_kept`` boxes (default ``max_boxes``), is it merged into at most that many
-    (:func:`intervals.imagesp.coarsen`) and retested. A set cut short or merged is
-    ``coarse``.
+    (:func:`intervals.imagesp.coarsen`) and retested (``merged`` true). A set cut short or
+    merged is ``coarse``.
 
     With ``ray_test`` the boxes SIVIA would store are also tested by
     :func:`intervals.sonar.rays.joint_rejection_counts` (pieces of the box, each rejected by the
@@ -184,7 +185,7 @@ def _pave(
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
-        return paving, rejects
+        return paving, rejects, False
 
     def retest(b):  # (kept boxes, their counts): the boxes the test does not reject
         kept, kept_counts = [b[:0]], [np.zeros(0, dtype=np.int64)]
@@ -212,13 +213,13 @@ def _pave(
     boundary = np.concatenate([done, tested, untested])
     # an untested box counts no rejecting sensor: kept in every S_q (sound, coarser)
     rejects = np.concatenate([rejects_done, tested_counts, np.zeros(untested.shape[0], np.int64)])
-    inner_boxes = paving.inner
+    inner_boxes, merged = paving.inner, False
     if max_boxes is not None and inner_boxes.shape[0] + boundary.shape[0] > kept_cap:
         # still too many: merged into at most kept_cap boxes (a coarser cover), retested
-        merged = coarsen(np.concatenate([inner_boxes, boundary]), kept_cap, scale)
-        boundary, rejects = retest(merged)
-        inner_boxes = inner_boxes[:0]
-    return Subpaving(inner_boxes, boundary, coarse=True), rejects
+        cells = coarsen(np.concatenate([inner_boxes, boundary]), kept_cap, scale)
+        boundary, rejects = retest(cells)
+        inner_boxes, merged = inner_boxes[:0], True
+    return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
 
 
 def localize(
@@ -285,6 +286,8 @@ class GomneResult:
     paving: Subpaving
     q: int | None
     q_set: int | None
+    merged: bool = False
+    """The budget merged the set's boxes (a set finer than ``max_kept`` boxes would hold)."""
 
     @property
     def consistent(self) -> bool:
@@ -327,7 +330,7 @@ def gomne(
     boxes = _initial_poses(initial)
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
-    widest, rejects = _pave(
+    widest, rejects, merged = _pave(
         local,
         boxes,
         eps,
@@ -341,7 +344,7 @@ def gomne(
         max_kept,
     )
     if widest.is_empty:
-        return GomneResult(widest, None, None)
+        return GomneResult(widest, None, None, merged)
     if inner:
         for q in range(q_max):
             minimal = localize(
@@ -366,4 +369,4 @@ def gomne(
         # q sensors, so the reject counts of the q_max pass give every S_q without a new pass.
         q = int(min(rejects.min(), q_max))
         minimal = Subpaving(widest.inner, widest.boundary[rejects <= q], coarse=widest.coarse)
-    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q)
+    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q, merged)

@@ -61,6 +61,12 @@ from validated_records import bounded, validate_fields
 #: tight and costs no component search).
 SPREAD_FACTOR = 8.0
 
+#: A :class:`Refinement` holds at most this many times ``max_boxes`` boxes (the reported set
+#: at most ``max_boxes``): 9.6 MB at the default 10 000, for one epoch at a time. As many as
+#: SIVIA may test (``TESTS_PER_BOX``): fewer made the refinement of office at ``max_boxes``
+#: 200 merge, and stop, every epoch; with 20 it is fine again by the ninth.
+KEPT_PER_BOX = TESTS_PER_BOX
+
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
 MIN_EPS_M = 1e-3
@@ -145,12 +151,17 @@ class Refinement:
     """The finer set behind an epoch whose reported set is coarse, for the next epochs.
 
     ``scan``: the scan it was paved on; ``paving``: its cover of the poses consistent with
-    that scan, with up to ``TESTS_PER_BOX * max_boxes`` boxes (all SIVIA refined within its
-    budget, before the merge that brings the reported set down to ``max_boxes``);
+    that scan, with up to :data:`KEPT_PER_BOX` ``* max_boxes`` boxes (what SIVIA refined
+    within its budget, before the merge that brings the reported set down to ``max_boxes``);
     ``age_s``: seconds from that scan to the epoch that returned it. While ``paving`` is
-    coarse, each next epoch first continues its paving on its own ``scan`` (the same instant:
-    no motion to add, so every budget spent refines it), then predicts from it over
-    ``age_s`` plus the epoch's ``dt_s``; an epoch whose own set is fine drops it. Held by the
+    coarse, each next epoch first continues its paving on its own ``scan`` under a budget of
+    its own (the same instant: no motion to add, so every budget spent refines it; SIVIA's
+    depth-first order leaves the boxes it did not reach as they were), then predicts from it
+    over ``age_s`` plus the epoch's ``dt_s`` (its wide boxes apart, :meth:`IntervalTracker.
+    groups`) and paves that; such an epoch costs at most twice the budget. An epoch whose own
+    set is fine drops it, and so does one whose set the budget had to merge into
+    ``KEPT_PER_BOX * max_boxes`` boxes (a set that large by nature, not for want of budget:
+    refining it would only double the cost). Held by the
     caller between epochs (:meth:`IntervalTracker.step`), never logged."""
 
     scan: SonarScan
@@ -242,23 +253,27 @@ class IntervalTracker:
         reach = s.v_max_m_s * dt_s
         return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
 
-    def groups(self, boxes: np.ndarray) -> np.ndarray:
+    def groups(self, boxes: np.ndarray, apart: bool = False) -> np.ndarray:
         """Boxes ``(M, 3, 2)`` whose union holds ``boxes (N, 3, 2)`` (headings unwrapped near
         the first box), for the prediction: their hull when it is at most
-        :data:`SPREAD_FACTOR` times their volume and every box is no wider than ``eps_m``;
-        else each box wider than ``eps_m`` (a box the budget left whole or merged) alone and
-        the hull of each connected component of the others (:func:`component_hulls`)."""
+        :data:`SPREAD_FACTOR` times their volume (and, with ``apart``, every box is no wider
+        than ``eps_m``); else the hull of each connected component (:func:`component_hulls`)
+        of the boxes, those wider than ``eps_m`` each alone with ``apart`` (the boxes a
+        budget left whole, in a :class:`Refinement`: their finer neighbours stay apart)."""
         s = self.settings
         whole = hull(boxes)
-        wide = max_width(boxes, pose_scale(s.heading_scale_m_per_rad)) > s.eps_m
+        wide = np.zeros(boxes.shape[0], dtype=bool)
+        if apart:
+            wide = max_width(boxes, pose_scale(s.heading_scale_m_per_rad)) > s.eps_m
         if not wide.any() and volume(whole[None]) <= SPREAD_FACTOR * volume(boxes):
             return whole[None]
         fine = boxes[~wide]
         hulls = component_hulls(fine) if fine.shape[0] else fine
         return np.concatenate([hulls, boxes[wide]])
 
-    def predict(self, previous: Subpaving, dt_s: float) -> np.ndarray:
-        """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``."""
+    def predict(self, previous: Subpaving, dt_s: float, apart: bool = False) -> np.ndarray:
+        """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``
+        (``apart``: see :meth:`groups`)."""
         if not (np.isfinite(dt_s) and dt_s >= 0):
             raise IntervalError(f"tracker: dt_s must be finite and >= 0, got {dt_s!r}")
         boxes = previous.outer
@@ -266,7 +281,7 @@ class IntervalTracker:
         s = self.settings
         scale = pose_scale(s.heading_scale_m_per_rad)
         if s.tracker == Tracker.SIVIA:
-            return wrap_headings(self.limits(self.groups(boxes), dt_s))
+            return wrap_headings(self.limits(self.groups(boxes, apart), dt_s))
         motion = self.motion if self.motion is not None else self.limits
         try:
             cells = imagesp(
@@ -278,10 +293,12 @@ class IntervalTracker:
                 max_cells=TESTS_PER_BOX * s.max_boxes,
             )
         except IntervalError:  # more cells than the budget: the image of the groups' hulls
-            cells = motion(self.groups(boxes), dt_s)
+            cells = motion(self.groups(boxes, apart), dt_s)
         return wrap_headings(cells)
 
     def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3):
+        """GOMNE on ``initial`` under the budget, keeping up to :data:`KEPT_PER_BOX`
+        ``* max_boxes`` boxes (for a :class:`Refinement`)."""
         s = self.settings
         return gomne(
             scan,
@@ -293,7 +310,7 @@ class IntervalTracker:
             engine=s.engine,
             ray_test=s.ray_test,
             max_boxes=s.max_boxes,
-            max_kept=TESTS_PER_BOX * s.max_boxes,
+            max_kept=KEPT_PER_BOX * s.max_boxes,
             splits_per_level=splits_per_level,
         )
 
@@ -310,14 +327,14 @@ class IntervalTracker:
         the epoch then refines that set on its own scan and predicts from it instead of from
         ``previous`` (its coarse, merged report)."""
         start = time.perf_counter()
-        pending = None
+        pending, apart = None, refinement is not None
         if refinement is not None and not refinement.paving.coarse:
             previous, dt_s = refinement.paving, refinement.age_s + dt_s
-        elif refinement is not None:
+        elif refinement is not None:  # refined on its own scan first (a budget of its own)
             older = self._search(refinement.scan, refinement.paving.outer)
-            if older.consistent:  # else (budget-free test of a sound cover): search globally
+            if older.consistent:  # else (a sound cover of a consistent set): search globally
                 previous, dt_s = older.paving, refinement.age_s + dt_s
-                if older.paving.coarse:
+                if older.paving.coarse and not older.merged:  # merged: too large to refine
                     pending = Refinement(refinement.scan, older.paving, dt_s)
             else:
                 previous = None
@@ -325,7 +342,7 @@ class IntervalTracker:
             found = self._search(scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL)
             status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
-            found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
+            found = self._search(scan, as_boxes(self.predict(previous, dt_s, apart)))
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
@@ -333,6 +350,8 @@ class IntervalTracker:
         inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
         if not coarse and inner.shape[0] + boundary.shape[0] <= s.max_boxes:
             pending = None  # a fine set, reported whole: an older refinement is done with
+        elif found.merged:
+            pending = None  # a set the budget had to merge is too large to refine: none
         elif pending is None or not coarse:
             # kept for the next epoch: this set, finer than the report merged to max_boxes
             # (while an older refinement is still coarse, that one goes on instead)

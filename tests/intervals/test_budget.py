@@ -162,3 +162,29 @@ def test_budget_with_the_ray_test_keeps_the_truth():
         result = gomne(scan, prior, 0.02, 1, ray_test=True, max_boxes=max_boxes)
         assert result.consistent and result.paving.contains(truth[None])[0]
         assert result.paving.outer.shape[0] <= max_boxes
+
+
+def test_a_coarse_epoch_is_refined_back_to_eps_on_a_repetitive_plan():
+    """The office floor of twin rooms (``office``) under a budget of 200 boxes (4000 tests an
+    epoch; its global search needs about 20 000): the first epoch is coarse, its set spanning
+    most of the floor; the next epochs refine it on its own scan (:class:`Refinement`) until
+    the set is fine again, as small as without a budget, and every epoch keeps the truth
+    within the budget (the regression of office_floor, where every epoch stayed coarse)."""
+    import dataclasses
+
+    from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
+
+    spec = load_scenario("office").with_run(duration_s=16.0)
+    budget = dataclasses.replace(spec.estimation.intervals, max_boxes=200)
+    spec = dataclasses.replace(
+        spec, estimation=dataclasses.replace(spec.estimation, intervals=budget)
+    )
+    epochs = run_scenario(spec).estimation.epochs
+    assert epochs.contains_truth.all()
+    assert (epochs.box_counts <= 200).all()
+    assert epochs.coarse[0] and epochs.area_m2[0] > 50.0  # cut short: most of the 96 m^2 floor
+    fine = np.flatnonzero(~epochs.coarse)
+    assert fine.size and fine[0] <= 12  # refined back within a dozen epochs
+    assert not epochs.coarse[fine[0] :].any()  # and it stays fine
+    assert epochs.area_m2[fine[0] :].max() < 0.5  # as tight as unbudgeted tracking (0.01-0.05)
