@@ -55,17 +55,23 @@ def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return v, scores
 
 
-def _split(boxes: np.ndarray, eps: float, scale, times: int) -> np.ndarray:
+def _split(boxes: np.ndarray, eps: float, scale, times: int, grouped: bool = False) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
-    rounds in all."""
+    rounds in all (``grouped``: the children in the order of their parents)."""
     done, todo = [], boxes
+    parents, todo_parents = [], np.arange(boxes.shape[0])
     for _ in range(times):
         left, right = bisect(todo, scale)
         children = np.concatenate([left, right], axis=0)
+        owners = np.concatenate([todo_parents, todo_parents])
         wide = max_width(children, scale) > eps
         done.append(children[~wide])
-        todo = children[wide]
-    return np.concatenate([*done, todo], axis=0)
+        parents.append(owners[~wide])
+        todo, todo_parents = children[wide], owners[wide]
+    out = np.concatenate([*done, todo], axis=0)
+    if grouped:
+        out = out[np.argsort(np.concatenate([*parents, todo_parents]), kind="stable")]
+    return out
 
 
 def _extra_splits(boxes: np.ndarray, min_level_boxes: int) -> int:
@@ -163,10 +169,11 @@ def sivia(
         boundary.append(undecided[small])
         wide = undecided[~small]
         if wide.shape[0]:
-            if max_tested is not None:  # under a budget, the lowest scores' children first
+            budget = max_tested is not None
+            if budget:  # under a budget, the lowest scores' children first
                 wide = wide[np.argsort(scores[v == UNDECIDED][~small], kind="stable")]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-            pending.append(_split(wide, eps, scale, splits))
+            pending.append(_split(wide, eps, scale, splits, grouped=budget))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,

@@ -43,6 +43,7 @@ from intervals.boxes import (
     hull,
     inflate,
     max_width,
+    merge_adjacent,
     pose_scale,
     unwrap_headings,
     volume,
@@ -356,7 +357,10 @@ class IntervalTracker:
             # kept for the next epoch: this set, finer than the report merged to max_boxes
             # (while an older refinement is still coarse, that one goes on instead)
             pending = Refinement(scan, Subpaving(inner, boundary, coarse))
-        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # too many: merged for the report
+        # the report: adjacent boxes joined (the same union, fewer boxes), then, if still too
+        # many, merged into a coarser cover
+        inner, boundary = merge_adjacent(inner), merge_adjacent(boundary)
+        if inner.shape[0] + boundary.shape[0] > s.max_boxes:
             scale = pose_scale(s.heading_scale_m_per_rad)
             merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
             inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True

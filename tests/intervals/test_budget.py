@@ -188,3 +188,18 @@ def test_a_coarse_epoch_is_refined_back_to_eps_on_a_repetitive_plan():
     assert fine.size and fine[0] <= 12  # refined back within a dozen epochs
     assert not epochs.coarse[fine[0] :].any()  # and it stays fine
     assert epochs.area_m2[fine[0] :].max() < 0.5  # as tight as unbudgeted tracking (0.01-0.05)
+
+
+def test_corridor_epochs_hold_a_sound_strip_in_few_boxes():
+    """The 30 m corridor, ambiguous along its axis: every epoch of a 30 s run keeps the
+    truth; the set, a strip of up to about 1.5 m^2 (hundreds of ``eps`` cells), is reported
+    in at most 400 boxes (adjacent boxes joined exactly: 3300 before) and never coarse."""
+    from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
+
+    epochs = run_scenario(load_scenario("corridor").with_run(duration_s=30.0)).estimation.epochs
+    assert epochs.contains_truth.all() and not epochs.coarse.any()
+    assert epochs.area_m2.max() > 0.5  # a strip, not a point
+    assert epochs.box_counts.max() <= 400
+    cells = epochs.area_m2 / 0.05**2  # the eps cells the strip's area holds, at least
+    assert (epochs.box_counts < cells).sum() > len(cells) / 2
