@@ -74,6 +74,19 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, engine: str):
     return verdicts, rejects, reject
 
 
+def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the box meets (closed intervals) at least one of ``regions (M, d, 2)``;
+    ``O(N M)``, for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
+    lo_ok = boxes[:, None, :, 0] <= regions[None, :, :, 1]
+    hi_ok = regions[None, :, :, 0] <= boxes[:, None, :, 1]
+    return np.any(np.all(lo_ok & hi_ok, axis=2), axis=1)
+
+
+MAX_WITHIN_REGIONS = 256
+"""The most regions ``within`` may hold (:func:`localize`): each test call compares its
+boxes with every region."""
+
+
 def box_test(
     boxes, scan: SonarScan, q: int = 0, inner: bool = True, engine: str = "compiled"
 ) -> np.ndarray:
@@ -122,6 +135,7 @@ def _pave(
     ray_test,
     max_boxes,
     max_kept=None,
+    within=None,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
     number of sensors rejecting each boundary box (``merged``: see below), kept from the
@@ -148,13 +162,15 @@ def _pave(
     level gave the same volumes at twice the time).
     """
     stored, counts = [], []
+    if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
+        within = as_boxes(within, "within")
 
     def recount(b, reject):
         return rays.joint_rejection_counts(
             b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
         )
 
-    def test(b):
+    def sonar_test(b):
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
         keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
@@ -165,6 +181,16 @@ def _pave(
         stored.append(b[keep])
         counts.append(rejects[keep])
         return verdicts, rejects  # under a budget, the boxes fewest sensors reject go first
+
+    def test(b):
+        if within is None:
+            return sonar_test(b)
+        meets = meets_any(b, within)
+        verdicts = np.full(b.shape[0], OUTSIDE, dtype=np.int8)
+        rejects = np.full(b.shape[0], local.belt.count + 1, dtype=np.int64)
+        if meets.any():
+            verdicts[meets], rejects[meets] = sonar_test(b[meets])
+        return verdicts, rejects
 
     paving = sivia(
         test,
@@ -308,6 +334,7 @@ def gomne(
     max_boxes: int | None = None,
     max_kept: int | None = None,
     splits_per_level: int = 3,
+    within=None,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -321,8 +348,12 @@ def gomne(
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
     ``engine``, ``ray_test``, ``max_boxes``, ``max_kept`` and ``splits_per_level``: as in
-    :func:`localize` (a coarse ``S_qmax`` gives a coarse ``S_q``); the tracker's global
-    searches use :data:`GLOBAL_SPLITS_PER_LEVEL`.
+    :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
+    2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
+    component): SIVIA rejects the boxes meeting none of them without testing them, so the
+    set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
+    ignored). A coarse ``S_qmax`` gives a coarse ``S_q``; the tracker's global searches use
+    :data:`GLOBAL_SPLITS_PER_LEVEL`.
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
@@ -342,6 +373,7 @@ def gomne(
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
         max_kept,
+        None if within is None or len(within) > MAX_WITHIN_REGIONS else within,
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)

@@ -51,7 +51,8 @@ from intervals.boxes import (
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen, imagesp
-from intervals.localize import GLOBAL_SPLITS_PER_LEVEL, TESTS_PER_BOX, gomne
+from intervals.localize import GLOBAL_SPLITS_PER_LEVEL, TESTS_PER_BOX, box_test, gomne
+from intervals.sivia import OUTSIDE
 from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarScan
 from validated_records import bounded, validate_fields
@@ -297,7 +298,14 @@ class IntervalTracker:
             cells = motion(self.groups(boxes, apart), dt_s)
         return wrap_headings(cells)
 
-    def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3):
+    def _hull_prediction(self, previous: Subpaving, dt_s: float) -> np.ndarray:
+        """The hull of ``previous`` (headings unwrapped near its first box) grown by the
+        limits over ``dt_s``, headings wrapped."""
+        boxes = previous.outer
+        boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+        return wrap_headings(self.limits(hull(boxes)[None], dt_s))
+
+    def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3, within=None):
         """GOMNE on ``initial`` under the budget, keeping up to :data:`KEPT_PER_BOX`
         ``* max_boxes`` boxes (for a :class:`Refinement`)."""
         s = self.settings
@@ -313,6 +321,7 @@ class IntervalTracker:
             max_boxes=s.max_boxes,
             max_kept=KEPT_PER_BOX * s.max_boxes,
             splits_per_level=splits_per_level,
+            within=within,
         )
 
     def step(
@@ -328,6 +337,7 @@ class IntervalTracker:
         the epoch then refines that set on its own scan and predicts from it instead of from
         ``previous`` (its coarse, merged report)."""
         start = time.perf_counter()
+        s = self.settings
         pending, apart = None, refinement is not None
         if refinement is not None and not refinement.paving.coarse:
             previous, dt_s = refinement.paving, refinement.age_s + dt_s
@@ -343,11 +353,17 @@ class IntervalTracker:
             found = self._search(scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL)
             status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
-            found = self._search(scan, as_boxes(self.predict(previous, dt_s, apart)))
+            predicted = as_boxes(self.predict(previous, dt_s, apart))
+            within = None
+            if s.tracker == Tracker.SIVIA and not apart and predicted.shape[0] > 1:
+                # paved from the whole hull, as for one component (the same bisections, so
+                # never a looser set), every box outside the components' predictions rejected
+                within, predicted = predicted, self._hull_prediction(previous, dt_s)
+            found = self._search(scan, predicted, within=within)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
-        s, coarse = self.settings, found.paving.coarse
+        coarse = found.paving.coarse
         inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
         if not coarse and inner.shape[0] + boundary.shape[0] <= s.max_boxes:
             pending = None  # a fine set, reported whole: an older refinement is done with
@@ -363,7 +379,13 @@ class IntervalTracker:
         if inner.shape[0] + boundary.shape[0] > s.max_boxes:
             scale = pose_scale(s.heading_scale_m_per_rad)
             merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
-            inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True
+            merged = wrap_headings(merged)
+            # the merged cells tested once: those the sonar or the room reject hold no pose
+            # of the set (box_test, at the set's relaxation), the rest is the report
+            held = box_test(merged, scan.restricted_to(merged), found.q_set, False, s.engine)
+            if (held != OUTSIDE).any():
+                merged = merged[held != OUTSIDE]
+            inner, boundary, coarse = np.zeros((0, 3, 2)), merged, True
         paving = Subpaving(inner, boundary, coarse)
         elapsed_s = time.perf_counter() - start
         return EpochResult(paving, found.q, status, elapsed_s, coarse, pending)
