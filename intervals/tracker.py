@@ -51,7 +51,13 @@ from intervals.boxes import (
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen, imagesp
-from intervals.localize import GLOBAL_SPLITS_PER_LEVEL, TESTS_PER_BOX, box_test, gomne
+from intervals.localize import (
+    GLOBAL_SPLITS_PER_LEVEL,
+    MAX_WITHIN_REGIONS,
+    TESTS_PER_BOX,
+    box_test,
+    gomne,
+)
 from intervals.sivia import OUTSIDE
 from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarScan
@@ -358,7 +364,9 @@ class IntervalTracker:
             if s.tracker == Tracker.SIVIA and not apart and predicted.shape[0] > 1:
                 # paved from the whole hull, as for one component (the same bisections, so
                 # never a looser set), every box outside the components' predictions rejected
-                within, predicted = predicted, self._hull_prediction(previous, dt_s)
+                # (with more regions than a test call compares, the hull alone)
+                within = predicted if predicted.shape[0] <= MAX_WITHIN_REGIONS else None
+                predicted = self._hull_prediction(previous, dt_s)
             found = self._search(scan, predicted, within=within)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
