@@ -7,9 +7,11 @@ Two predictions are offered (docs/models.md section 4):
 
 * ``"sivia"``: the hull of the previous outer boxes, inflated by the limits, inverted as one
   box; when the set is spread (its hull more than :data:`SPREAD_FACTOR` times its volume, as
-  a repetitive map's several candidate places) or coarse, the hull of each connected
-  component of its boxes no wider than ``eps`` and each wider box (left whole by the budget)
-  alone, so that the next epoch refines a coarse cover instead of re-paving its hull;
+  a repetitive map's several candidate places), the boxes of that paving meeting none of
+  its components' hulls, inflated, are rejected untested (never a looser set than the hull
+  alone); a :class:`Refinement` (the finer set behind a coarse epoch) is predicted box by
+  box for its boxes wider than ``eps`` (left whole by the budget), so that the next epoch
+  refines a coarse cover instead of re-paving its hull;
 * ``"imagesp"``: every previous box mapped through the motion inclusion function (by default
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
