@@ -113,9 +113,12 @@ def _shift_turns(boxes: np.ndarray, turns: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def unwrap_headings(boxes: np.ndarray, reference_rad: float, axis: int = 2) -> np.ndarray:
+def unwrap_headings(
+    boxes: np.ndarray, reference_rad: float | np.ndarray, axis: int = 2
+) -> np.ndarray:
     """The same poses, each box moved by whole turns in heading so that its centre lies within
-    ``pi`` of ``reference_rad`` (lets the hull of a set span the +-pi cut tightly)."""
+    ``pi`` of ``reference_rad`` (one for all, or one per box ``(N,)``; lets the hull of a set
+    span the +-pi cut tightly)."""
     centre = (boxes[:, axis, 0] + boxes[:, axis, 1]) / 2.0
     return _shift_turns(boxes, np.round((centre - reference_rad) / (2.0 * np.pi)), axis)
 
@@ -329,12 +332,61 @@ def connected_components(
     return int(count), rank[inverse]
 
 
+def merge_adjacent(boxes: np.ndarray, rounds: int = 2) -> np.ndarray:
+    """The same union in fewer boxes, exactly: along each axis in turn, every run of boxes
+    with identical bounds on the other axes, each starting where the one before it ends on
+    this axis (``hi == lo``, in floating point), becomes one box from the run's first lower
+    bound to its last upper bound; ``rounds`` passes over the axes (fewer when a pass merges
+    nothing). ``O(N log N)`` a pass (a lexicographic sort). Siblings SIVIA kept both of merge
+    back into their parent, so a strip where the set is ambiguous (a corridor, along its
+    axis) is held by a few long boxes instead of a row of ``eps`` cells."""
+    d = boxes.shape[1]
+    for _ in range(rounds):
+        before = boxes.shape[0]
+        for axis in range(d):
+            if boxes.shape[0] < 2:
+                return boxes
+            others = [a for a in range(d) if a != axis]
+            keys = [boxes[:, axis, 0]] + [boxes[:, a, k] for a in others for k in (0, 1)]
+            b = boxes[np.lexsort(keys)]  # by the other axes' bounds, then by lower bound
+            joined = np.all(b[1:, others] == b[:-1, others], axis=(1, 2))
+            joined &= b[1:, axis, 0] == b[:-1, axis, 1]
+            first = np.flatnonzero(np.concatenate([[True], ~joined]))
+            last = np.append(first[1:] - 1, b.shape[0] - 1)
+            boxes = b[first].copy()
+            boxes[:, axis, 1] = b[last, axis, 1]
+        if boxes.shape[0] == before:
+            break
+    return boxes
+
+
+def component_hulls(boxes: np.ndarray, periodic_axis: int | None = 2) -> np.ndarray:
+    """The hull of each connected component of the boxes ``(N, d, 2)`` (N >= 1): ``(C, d, 2)``
+    in the order of :func:`connected_components`, whose union holds the boxes. With a
+    ``periodic_axis`` (the heading) each component's boxes are first moved by whole turns
+    next to its first box (:func:`unwrap_headings`), so a component across the +-pi cut keeps a
+    narrow interval there (possibly beyond ``pi``; a component round the whole circle gets a
+    hull at least ``2 pi`` wide)."""
+    count, labels = connected_components(boxes, periodic_axis)
+    if periodic_axis is not None:
+        first = np.empty(count, dtype=np.int64)
+        first[labels[::-1]] = np.arange(labels.size)[::-1]  # each component's first box
+        own = boxes[first[labels], periodic_axis]
+        boxes = unwrap_headings(boxes, (own[:, 0] + own[:, 1]) / 2.0, periodic_axis)
+    order = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[order], np.arange(count))
+    lo = np.minimum.reduceat(boxes[order, :, 0], starts, axis=0)
+    hi = np.maximum.reduceat(boxes[order, :, 1], starts, axis=0)
+    return np.stack([lo, hi], axis=-1)
+
+
 @dataclass(frozen=True)
 class Subpaving:
     """Result of a set inverter: non-overlapping boxes that approximate a set ``X``.
 
     ``inner (Ni, d, 2)``: boxes proved inside ``X``. ``boundary (Nb, d, 2)``: undecided boxes of
-    width at most ``eps``. The outer approximation ``inner ∪ boundary`` contains ``X``.
+    width at most ``eps`` (or exact unions of such boxes, :func:`merge_adjacent`, as the
+    tracker reports them). The outer approximation ``inner ∪ boundary`` contains ``X``.
     ``coarse``: a budget cut the paving short (:func:`intervals.sivia.sivia`'s ``max_tested``,
     :func:`coarsen`): some boundary boxes are wider than ``eps``, or merged; still a cover.
     """

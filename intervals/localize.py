@@ -41,6 +41,13 @@ one pass (:func:`localize`): about 1.5 s of the compiled test at 8 us a box for 
 default 10 000, above the 190 000 boxes a global search of a 30 x 30 m, 184-segment map
 tests."""
 
+GLOBAL_SPLITS_PER_LEVEL = 2
+"""Bisections per SIVIA level in the tracker's global searches (3 elsewhere, :func:`localize`).
+The big levels of a global search are mostly rejected one bisection below the level where
+they are undecided, so cutting twice a level instead of three times tests fewer boxes
+(office_floor's global search: 2.1 s instead of 3.7 s on an idle machine, the same set; small
+tracking sets are faster at 3, with fewer test calls)."""
+
 RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD = 0.1
 """With ``ray_test=None`` (auto), :mod:`intervals.sonar.rays` joins the box test when the belt's
 half-aperture is at most this. Measured (``benchmarks/intervals_vs_codac.py``, tracking epochs
@@ -65,6 +72,19 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, engine: str):
         inside[live] &= room_in
     verdicts = np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
     return verdicts, rejects, reject
+
+
+def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the box meets (closed intervals) at least one of ``regions (M, d, 2)``;
+    ``O(N M)``, for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
+    lo_ok = boxes[:, None, :, 0] <= regions[None, :, :, 1]
+    hi_ok = regions[None, :, :, 0] <= boxes[:, None, :, 1]
+    return np.any(np.all(lo_ok & hi_ok, axis=2), axis=1)
+
+
+MAX_WITHIN_REGIONS = 256
+"""The most regions ``within`` may hold (:func:`localize`): each test call compares its
+boxes with every region."""
 
 
 def box_test(
@@ -120,19 +140,25 @@ def _pave(
     engine,
     ray_test,
     max_boxes,
+    max_kept=None,
+    within=None,
     contract=True,
 ):
-    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,))`` with the number of
-    sensors rejecting each boundary box, kept from the SIVIA level that stored the box (the
-    boundary boxes are the undecided boxes no wider than ``eps``, in the order SIVIA met
-    them; checked, and recomputed if SIVIA ever stored them otherwise).
+    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
+    number of sensors rejecting each boundary box (``merged``: see below), kept from the
+    SIVIA level that stored the box (the boundary boxes are the undecided boxes no wider than
+    ``eps``, in the order SIVIA met them; checked, and recomputed if SIVIA ever stored them
+    otherwise).
 
     ``max_boxes`` (None: no budget): the budget of :func:`localize`. SIVIA may then test at
-    most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes and hand at most ``max_boxes`` to one
-    test call; a set of more than ``max_boxes`` boxes is merged into at most that many
-    (:func:`intervals.imagesp.coarsen`). A set cut short or merged is ``coarse``; its boxes are
-    tested once more and those the test rejects are dropped (each rejection is sound for
-    every pose of the box), the counts recomputed on the boxes kept.
+    most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes, best first (the boxes fewest sensors
+    reject first, see :func:`intervals.sivia.sivia`), and hand at most ``max_boxes`` to one
+    test call. When it is cut short the boxes it left untested (children of undecided boxes)
+    are tested once, in chunks, and those the test rejects are dropped (each rejection is
+    sound for every pose of the box); only then, if the set still holds more than
+    ``max_kept`` boxes (default ``max_boxes``), is it merged into at most that many
+    (:func:`intervals.imagesp.coarsen`) and retested (``merged`` true). A set cut short or
+    merged is ``coarse``.
 
     With ``ray_test`` the boxes SIVIA would store are also tested by
     :func:`intervals.sonar.rays.joint_rejection_counts` (pieces of the box, each rejected by the
@@ -149,6 +175,8 @@ def _pave(
     is one (fewer rounds, or none, when the tests left do not allow them).
     """
     stored, counts, tested = [], [], [0]
+    if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
+        within = as_boxes(within, "within")
 
     def recount(b, reject):
         from intervals.sonar import rays  # its kernels compile only for runs with the ray test
@@ -157,7 +185,7 @@ def _pave(
             b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
         )
 
-    def test(b):
+    def sonar_test(b):
         tested[0] += b.shape[0]
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
         keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
@@ -168,7 +196,17 @@ def _pave(
             keep[out] = False
         stored.append(b[keep])
         counts.append(rejects[keep])
-        return verdicts
+        return verdicts, rejects  # under a budget, the boxes fewest sensors reject go first
+
+    def test(b):
+        if within is None:
+            return sonar_test(b)
+        meets = meets_any(b, within)
+        verdicts = np.full(b.shape[0], OUTSIDE, dtype=np.int8)
+        rejects = np.full(b.shape[0], local.belt.count + 1, dtype=np.int64)
+        if meets.any():
+            verdicts[meets], rejects[meets] = sonar_test(b[meets])
+        return verdicts, rejects
 
     paving = sivia(
         test,
@@ -181,26 +219,56 @@ def _pave(
         max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
         contract=(lambda b: contractor.contract(b, local, q)) if contract else None,
     )
-    if max_boxes is not None and paving.outer.shape[0] > max_boxes:
-        merged = coarsen(paving.outer, max_boxes, scale)
-        paving = Subpaving(np.zeros((0, 3, 2)), merged, coarse=True)
-    if paving.coarse:  # boxes kept whole or merged: test them once more, drop the rejected
-        verdicts, rejects, reject = _test_and_counts(paving.boundary, local, q, False, engine)
-        if ray_test:
-            rejects = recount(paving.boundary, reject)
-        keep = (verdicts != OUTSIDE) & (rejects <= q)
-        return Subpaving(paving.inner, paving.boundary[keep], coarse=True), rejects[keep]
-    rejects = np.concatenate(counts) if counts else np.zeros(0, dtype=np.intp)
-    if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
-        reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
-        rejects = recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
-    n = paving.boundary.shape[0]
-    rounds = contractor.SHAVE_ROUNDS
-    if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
-        rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
-    if contract and n and rounds:
-        paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
-    return paving, rejects
+    kept_cap = max_boxes if max_kept is None else max_kept
+    over = max_boxes is not None and paving.outer.shape[0] > kept_cap
+    if not (paving.coarse or over):
+        rejects = np.concatenate(counts) if counts else np.zeros(0, dtype=np.int64)
+        if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
+            reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
+            rejects = (
+                recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
+            )
+        n = paving.boundary.shape[0]
+        rounds = contractor.SHAVE_ROUNDS
+        if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
+            rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
+        if contract and n and rounds:
+            paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
+        return paving, rejects, False
+
+    def retest(b):  # (kept boxes, their counts): the boxes the test does not reject
+        kept, kept_counts = [b[:0]], [np.zeros(0, dtype=np.int64)]
+        for chunk in np.array_split(b, max(1, -(-b.shape[0] // (max_boxes or DEFAULT_MAX_BOXES)))):
+            verdicts, rejects, reject = _test_and_counts(chunk, local, q, False, engine)
+            if ray_test:
+                rejects = recount(chunk, reject)
+            keep = (verdicts != OUTSIDE) & (rejects <= q)
+            kept.append(chunk[keep])
+            kept_counts.append(rejects[keep])
+        return np.concatenate(kept), np.concatenate(kept_counts)
+
+    # Cut short: the boundary holds the boxes SIVIA stored (tested, each with its count) and
+    # then the boxes it left untested (children of undecided boxes); those are tested now,
+    # once (most of a frontier's boxes are rejected at the next level), before any merge.
+    done = np.concatenate([*stored, paving.boundary[:0]])
+    rejects_done = np.concatenate([*counts, np.zeros(0, dtype=np.int64)])
+    if not np.array_equal(done, paving.boundary[: done.shape[0]]):
+        done, rejects_done = done[:0], rejects_done[:0]  # not in SIVIA's order: all retested
+    # at most as many retests as the budget's tests; boxes beyond are kept whole, untested
+    cap = TESTS_PER_BOX * max_boxes if max_boxes is not None else paving.boundary.shape[0]
+    rest = paving.boundary[done.shape[0] :]
+    tested, tested_counts = retest(rest[:cap])
+    untested = rest[cap:]
+    boundary = np.concatenate([done, tested, untested])
+    # an untested box counts no rejecting sensor: kept in every S_q (sound, coarser)
+    rejects = np.concatenate([rejects_done, tested_counts, np.zeros(untested.shape[0], np.int64)])
+    inner_boxes, merged = paving.inner, False
+    if max_boxes is not None and inner_boxes.shape[0] + boundary.shape[0] > kept_cap:
+        # still too many: merged into at most kept_cap boxes (a coarser cover), retested
+        cells = coarsen(np.concatenate([inner_boxes, boundary]), kept_cap, scale)
+        boundary, rejects = retest(cells)
+        inner_boxes, merged = inner_boxes[:0], True
+    return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
 
 
 def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
@@ -228,6 +296,7 @@ def localize(
     engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
+    max_kept: int | None = None,
     contract: bool = True,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
@@ -244,7 +313,10 @@ def localize(
     SIVIA tests at most :data:`TESTS_PER_BOX` ``* max_boxes``, at most ``max_boxes`` per
     call, so time and memory are bounded whatever the map, the readings or ``eps``; where the
     budget cuts the paving short or merges its boxes the set is a coarser cover of the same
-    poses, marked ``coarse`` (:attr:`intervals.boxes.Subpaving.coarse`).
+    poses, marked ``coarse`` (:attr:`intervals.boxes.Subpaving.coarse`). ``max_kept``: with a
+    budget, the most boxes the set may hold instead (default ``max_boxes``; more keeps more of
+    what the budget refined, for a caller that refines the set further, see
+    :class:`intervals.tracker.Refinement`).
     ``contract``: contract every SIVIA frontier by :mod:`intervals.sonar.contractor` before
     the test (the same set or a tighter one: it only removes poses with more than ``q`` wrong
     readings).
@@ -265,6 +337,8 @@ def localize(
         engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
+        max_kept,
+        None,
         _checked_contract(contract),
     )[0]
 
@@ -281,6 +355,8 @@ class GomneResult:
     paving: Subpaving
     q: int | None
     q_set: int | None
+    merged: bool = False
+    """The budget merged the set's boxes (a set finer than ``max_kept`` boxes would hold)."""
 
     @property
     def consistent(self) -> bool:
@@ -299,6 +375,9 @@ def gomne(
     engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
+    max_kept: int | None = None,
+    splits_per_level: int = 3,
+    within=None,
     contract: bool = True,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
@@ -312,8 +391,13 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``engine``, ``ray_test``, ``max_boxes`` and ``contract``: as in :func:`localize` (a coarse
-    ``S_qmax`` gives a coarse ``S_q``).
+    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level`` and
+    ``contract``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
+    2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
+    component): SIVIA rejects the boxes meeting none of them without testing them, so the
+    set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
+    ignored). A coarse ``S_qmax`` gives a coarse ``S_q``; the tracker's global searches use
+    :data:`GLOBAL_SPLITS_PER_LEVEL`.
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
@@ -321,21 +405,23 @@ def gomne(
     boxes = _initial_poses(initial)
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
-    widest, rejects = _pave(
+    widest, rejects, merged = _pave(
         local,
         boxes,
         eps,
         q_max,
         scale,
         inner,
-        3,
+        splits_per_level,
         engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
+        max_kept,
+        None if within is None or len(within) > MAX_WITHIN_REGIONS else within,
         _checked_contract(contract),
     )
     if widest.is_empty:
-        return GomneResult(widest, None, None)
+        return GomneResult(widest, None, None, merged)
     if inner:
         for q in range(q_max):
             minimal = localize(
@@ -348,6 +434,7 @@ def gomne(
                 engine=engine,
                 ray_test=ray_test,
                 max_boxes=max_boxes,
+                max_kept=max_kept,
                 contract=contract,
             )
             if not minimal.is_empty:
@@ -360,4 +447,4 @@ def gomne(
         # q sensors, so the reject counts of the q_max pass give every S_q without a new pass.
         q = int(min(rejects.min(), q_max))
         minimal = Subpaving(widest.inner, widest.boundary[rejects <= q], coarse=widest.coarse)
-    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q)
+    return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q, merged)

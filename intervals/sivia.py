@@ -28,8 +28,10 @@ class Verdict(IntEnum):
 
 OUTSIDE, INSIDE, UNDECIDED = Verdict.OUTSIDE, Verdict.INSIDE, Verdict.UNDECIDED
 
-BoxTest = Callable[[np.ndarray], np.ndarray]
-"""``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values."""
+BoxTest = Callable[[np.ndarray], np.ndarray | tuple[np.ndarray, np.ndarray]]
+"""``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values, or ``(verdicts, scores
+(N,))``: a score per box, lower for the boxes to refine first under a budget (e.g. the number
+of sensors rejecting the box; see :func:`sivia`'s ``max_tested``)."""
 
 Contractor = Callable[[np.ndarray], np.ndarray]
 """``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row a box inside the input row holding
@@ -40,13 +42,22 @@ DEFAULT_MAX_BOXES = 200_000
 """Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
 
 
-def _verdicts(test: BoxTest, boxes: np.ndarray) -> np.ndarray:
-    v = np.asarray(test(boxes))
-    if v.shape != (boxes.shape[0],):
-        raise IntervalError(f"SIVIA test returned shape {v.shape}, expected ({boxes.shape[0]},)")
+def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The test's ``(verdicts (N,), scores (N,))`` (scores 0 when the test gives none)."""
+    out = test(boxes)
+    v, scores = out if isinstance(out, tuple) else (out, None)
+    v = np.asarray(v)
+    n = boxes.shape[0]
+    if v.shape != (n,):
+        raise IntervalError(f"SIVIA test returned shape {v.shape}, expected ({n},)")
     if np.any((v < OUTSIDE) | (v > UNDECIDED)):
         raise IntervalError("SIVIA test returned a value other than OUTSIDE, INSIDE, UNDECIDED")
-    return v
+    scores = np.zeros(n) if scores is None else np.asarray(scores, dtype=np.float64)
+    if scores.shape != (n,) or not np.all(np.isfinite(scores)):
+        raise IntervalError(
+            f"SIVIA test scores must be {n} finite numbers, got shape {scores.shape}"
+        )
+    return v, scores
 
 
 def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
@@ -58,17 +69,23 @@ def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
     return c[np.all(c[..., 0] <= c[..., 1], axis=1)]  # NaN compares false: dropped too
 
 
-def _split(boxes: np.ndarray, eps: float, scale, times: int) -> np.ndarray:
+def _split(boxes: np.ndarray, eps: float, scale, times: int, grouped: bool = False) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
-    rounds in all."""
+    rounds in all (``grouped``: the children in the order of their parents)."""
     done, todo = [], boxes
+    parents, todo_parents = [], np.arange(boxes.shape[0])
     for _ in range(times):
         left, right = bisect(todo, scale)
         children = np.concatenate([left, right], axis=0)
+        owners = np.concatenate([todo_parents, todo_parents])
         wide = max_width(children, scale) > eps
         done.append(children[~wide])
-        todo = children[wide]
-    return np.concatenate([*done, todo], axis=0)
+        parents.append(owners[~wide])
+        todo, todo_parents = children[wide], owners[wide]
+    out = np.concatenate([*done, todo], axis=0)
+    if grouped:
+        out = out[np.argsort(np.concatenate([*parents, todo_parents]), kind="stable")]
+    return out
 
 
 def _extra_splits(boxes: np.ndarray, min_level_boxes: int) -> int:
@@ -108,7 +125,13 @@ def sivia(
     chunk would exceed it, SIVIA stops and keeps every box not yet decided as a boundary box
     (possibly wider than ``eps``; each lies in a box the test left undecided, so the outer
     approximation still holds ``X``), and the subpaving is marked ``coarse``: a sound, coarser
-    cover in bounded time, never an error.
+    cover in bounded time, never an error. Under this budget the undecided boxes of a level
+    are bisected in the order of their scores (the test's second output, lowest first: e.g.
+    the fewest sensors rejecting them), so that the depth-first descent spends the budget on
+    the most promising boxes first, and what it leaves whole is mostly the boxes it never
+    reached, as they were: a later call on the same problem (a later epoch refining this
+    cover) starts where this one stopped instead of from a cover of finer, more numerous
+    boxes.
     ``contract``: a :data:`Contractor` applied to every frontier before the test (None: none);
     the boxes it empties are dropped as OUTSIDE, the others tested (and bisected) as
     contracted. Sound when the contractor is: it keeps every point that satisfies the
@@ -158,19 +181,22 @@ def sivia(
             if boxes.shape[0] == 0:
                 continue
         if max_tested is not None and tested + boxes.shape[0] > max_tested:
-            boundary.extend([boxes, *pending])  # undecided, kept whole: a coarser cover
+            boundary.extend([boxes, *pending[::-1]])  # undecided, kept whole: a coarser cover
             coarse = True
             break
         tested += boxes.shape[0]
-        v = _verdicts(test, boxes)
+        v, scores = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
         undecided = boxes[v == UNDECIDED]
         small = max_width(undecided, scale) <= eps
         boundary.append(undecided[small])
         wide = undecided[~small]
         if wide.shape[0]:
+            budget = max_tested is not None
+            if budget:  # under a budget, the lowest scores' children first
+                wide = wide[np.argsort(scores[v == UNDECIDED][~small], kind="stable")]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-            pending.append(_split(wide, eps, scale, splits))
+            pending.append(_split(wide, eps, scale, splits, grouped=budget))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,

@@ -6,7 +6,12 @@ at most ``v_max dt`` and turned at most ``omega_max dt``) and contracted by the 
 Two predictions are offered (docs/models.md section 4):
 
 * ``"sivia"``: the hull of the previous outer boxes, inflated by the limits, inverted as one
-  box;
+  box; when the set is spread (its hull more than :data:`SPREAD_FACTOR` times its volume, as
+  a repetitive map's several candidate places), the boxes of that paving meeting none of
+  its components' hulls, inflated, are rejected untested (never a looser set than the hull
+  alone); a :class:`Refinement` (the finer set behind a coarse epoch) is predicted box by
+  box for its boxes wider than ``eps`` (left whole by the budget), so that the next epoch
+  refines a coarse cover instead of re-paving its hull;
 * ``"imagesp"``: every previous box mapped through the motion inclusion function (by default
   the same inflation), the images merged into a regular grid (IMAGESP), then contracted by
   SIVIA. It keeps separate components apart, so it is tighter when the set is not convex.
@@ -36,18 +41,41 @@ import numpy as np
 from intervals.boxes import (
     Subpaving,
     as_boxes,
+    component_hulls,
     hull,
     inflate,
+    max_width,
+    merge_adjacent,
     pose_scale,
     unwrap_headings,
+    volume,
     wrap_headings,
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen, imagesp
-from intervals.localize import TESTS_PER_BOX, gomne
+from intervals.localize import (
+    GLOBAL_SPLITS_PER_LEVEL,
+    MAX_WITHIN_REGIONS,
+    TESTS_PER_BOX,
+    box_test,
+    gomne,
+)
+from intervals.sivia import OUTSIDE
 from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarScan
 from validated_records import bounded, validate_fields
+
+#: The ``"sivia"`` prediction predicts each connected component (and each box wider than
+#: ``eps``) apart when the hull of the previous set is more than this many times the set's
+#: volume; below, it predicts the hull (one component, compact: the hull is then about as
+#: tight and costs no component search).
+SPREAD_FACTOR = 8.0
+
+#: A :class:`Refinement` holds at most this many times ``max_boxes`` boxes (the reported set
+#: at most ``max_boxes``): 9.6 MB at the default 10 000, for one epoch at a time. As many as
+#: SIVIA may test (``TESTS_PER_BOX``): fewer made the refinement of office at ``max_boxes``
+#: 200 merge, and stop, every epoch; with 20 it is fine again by the ninth.
+KEPT_PER_BOX = TESTS_PER_BOX
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
@@ -132,6 +160,29 @@ class TrackerSettings:
 
 
 @dataclass(frozen=True)
+class Refinement:
+    """The finer set behind an epoch whose reported set is coarse, for the next epochs.
+
+    ``scan``: the scan it was paved on; ``paving``: its cover of the poses consistent with
+    that scan, with up to :data:`KEPT_PER_BOX` ``* max_boxes`` boxes (what SIVIA refined
+    within its budget, before the merge that brings the reported set down to ``max_boxes``);
+    ``age_s``: seconds from that scan to the epoch that returned it. While ``paving`` is
+    coarse, each next epoch first continues its paving on its own ``scan`` under a budget of
+    its own (the same instant: no motion to add, so every budget spent refines it; SIVIA's
+    depth-first order leaves the boxes it did not reach as they were), then predicts from it
+    over ``age_s`` plus the epoch's ``dt_s`` (its wide boxes apart, :meth:`IntervalTracker.
+    groups`) and paves that; such an epoch costs at most twice the budget. An epoch whose own
+    set is fine drops it, and so does one whose set the budget had to merge into
+    ``KEPT_PER_BOX * max_boxes`` boxes (a set that large by nature, not for want of budget:
+    refining it would only double the cost). Held by the
+    caller between epochs (:meth:`IntervalTracker.step`), never logged."""
+
+    scan: SonarScan
+    paving: Subpaving
+    age_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class EpochResult:
     """Outcome of one tracker epoch.
 
@@ -140,7 +191,9 @@ class EpochResult:
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
     ``guaranteed``); ``status``: an :class:`EpochStatus`; ``elapsed_s``: wall time of the
     epoch (timing, not a result); ``coarse``: the budget (``max_boxes``) cut the epoch's
-    paving short or merged its boxes: the set is a coarser sound cover.
+    paving short or merged its boxes: the set is a coarser sound cover; ``refinement``: for a
+    coarse epoch, the finer set the next epoch continues from (:class:`Refinement`; pass it
+    to the next :meth:`IntervalTracker.step`, and drop it from results kept afterwards).
     """
 
     paving: Subpaving | None
@@ -148,6 +201,7 @@ class EpochResult:
     status: EpochStatus
     elapsed_s: float = 0.0
     coarse: bool = False
+    refinement: Refinement | None = None
 
     @property
     def consistent(self) -> bool:
@@ -212,17 +266,36 @@ class IntervalTracker:
         reach = s.v_max_m_s * dt_s
         return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
 
-    def predict(self, previous: Subpaving, dt_s: float) -> np.ndarray:
-        """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``."""
+    def groups(self, boxes: np.ndarray, apart: bool = False) -> np.ndarray:
+        """Boxes ``(M, 3, 2)`` whose union holds ``boxes (N, 3, 2)`` (headings unwrapped near
+        the first box), for the prediction: their hull when it is at most
+        :data:`SPREAD_FACTOR` times their volume (and, with ``apart``, every box is no wider
+        than ``eps_m``); else the hull of each connected component (:func:`component_hulls`)
+        of the boxes, those wider than ``eps_m`` each alone with ``apart`` (the boxes a
+        budget left whole, in a :class:`Refinement`: their finer neighbours stay apart)."""
+        s = self.settings
+        whole = hull(boxes)
+        wide = np.zeros(boxes.shape[0], dtype=bool)
+        if apart:
+            wide = max_width(boxes, pose_scale(s.heading_scale_m_per_rad)) > s.eps_m
+        if not wide.any() and volume(whole[None]) <= SPREAD_FACTOR * volume(boxes):
+            return whole[None]
+        fine = boxes[~wide]
+        hulls = component_hulls(fine) if fine.shape[0] else fine
+        return np.concatenate([hulls, boxes[wide]])
+
+    def predict(self, previous: Subpaving, dt_s: float, apart: bool = False) -> np.ndarray:
+        """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``
+        (``apart``: see :meth:`groups`)."""
         if not (np.isfinite(dt_s) and dt_s >= 0):
             raise IntervalError(f"tracker: dt_s must be finite and >= 0, got {dt_s!r}")
         boxes = previous.outer
         boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
         s = self.settings
-        if s.tracker == Tracker.SIVIA:
-            return wrap_headings(self.limits(hull(boxes)[None], dt_s))
-        motion = self.motion if self.motion is not None else self.limits
         scale = pose_scale(s.heading_scale_m_per_rad)
+        if s.tracker == Tracker.SIVIA:
+            return wrap_headings(self.limits(self.groups(boxes, apart), dt_s))
+        motion = self.motion if self.motion is not None else self.limits
         try:
             cells = imagesp(
                 lambda b: motion(b, dt_s),
@@ -232,11 +305,20 @@ class IntervalTracker:
                 pitch=s.imagesp_pitch_m / scale,
                 max_cells=TESTS_PER_BOX * s.max_boxes,
             )
-        except IntervalError:  # more cells than the budget: the image of the hull, one box
-            cells = motion(hull(boxes)[None], dt_s)
+        except IntervalError:  # more cells than the budget: the image of the groups' hulls
+            cells = motion(self.groups(boxes, apart), dt_s)
         return wrap_headings(cells)
 
-    def _search(self, scan: SonarScan, initial: np.ndarray):
+    def _hull_prediction(self, previous: Subpaving, dt_s: float) -> np.ndarray:
+        """The hull of ``previous`` (headings unwrapped near its first box) grown by the
+        limits over ``dt_s``, headings wrapped."""
+        boxes = previous.outer
+        boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+        return wrap_headings(self.limits(hull(boxes)[None], dt_s))
+
+    def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3, within=None):
+        """GOMNE on ``initial`` under the budget, keeping up to :data:`KEPT_PER_BOX`
+        ``* max_boxes`` boxes (for a :class:`Refinement`)."""
         s = self.settings
         return gomne(
             scan,
@@ -249,25 +331,75 @@ class IntervalTracker:
             ray_test=s.ray_test,
             max_boxes=s.max_boxes,
             contract=s.contractor,
+            max_kept=KEPT_PER_BOX * s.max_boxes,
+            splits_per_level=splits_per_level,
+            within=within,
         )
 
-    def step(self, previous: Subpaving | None, scan: SonarScan, dt_s: float) -> EpochResult:
+    def step(
+        self,
+        previous: Subpaving | None,
+        scan: SonarScan,
+        dt_s: float,
+        refinement: Refinement | None = None,
+    ) -> EpochResult:
         """One epoch from the previous set (None: the start, or the epoch after one without a
-        set: search globally), on the scan taken ``dt_s`` seconds after the previous one."""
+        set: search globally), on the scan taken ``dt_s`` seconds after the previous one.
+        ``refinement``: the previous result's (:class:`Refinement`; None when it had none):
+        the epoch then refines that set on its own scan and predicts from it instead of from
+        ``previous`` (its coarse, merged report)."""
         start = time.perf_counter()
+        s = self.settings
+        pending, apart = None, refinement is not None
+        if refinement is not None and not refinement.paving.coarse:
+            previous, dt_s = refinement.paving, refinement.age_s + dt_s
+        elif refinement is not None:  # refined on its own scan first (a budget of its own)
+            older = self._search(refinement.scan, refinement.paving.outer)
+            if older.consistent:  # else (a sound cover of a consistent set): search globally
+                previous, dt_s = older.paving, refinement.age_s + dt_s
+                if older.paving.coarse and not older.merged:  # merged: too large to refine
+                    pending = Refinement(refinement.scan, older.paving, dt_s)
+            else:
+                previous = None
         if previous is None or previous.is_empty:
-            found = self._search(scan, global_box(self.map_bounds))
+            found = self._search(scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL)
             status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
-            found = self._search(scan, as_boxes(self.predict(previous, dt_s)))
+            predicted = as_boxes(self.predict(previous, dt_s, apart))
+            within = None
+            if s.tracker == Tracker.SIVIA and not apart and predicted.shape[0] > 1:
+                # paved from the whole hull, as for one component (the same bisections, so
+                # never a looser set), every box outside the components' predictions rejected
+                # (with more regions than a test call compares, the hull alone)
+                within = predicted if predicted.shape[0] <= MAX_WITHIN_REGIONS else None
+                predicted = self._hull_prediction(previous, dt_s)
+            found = self._search(scan, predicted, within=within)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
-        s, coarse = self.settings, found.paving.coarse
+        coarse = found.paving.coarse
         inner, boundary = wrap_headings(found.paving.inner), wrap_headings(found.paving.boundary)
-        if inner.shape[0] + boundary.shape[0] > s.max_boxes:  # boxes split at the +-pi cut
+        if not coarse and inner.shape[0] + boundary.shape[0] <= s.max_boxes:
+            pending = None  # a fine set, reported whole: an older refinement is done with
+        elif found.merged:
+            pending = None  # a set the budget had to merge is too large to refine: none
+        elif pending is None or not coarse:
+            # kept for the next epoch: this set, finer than the report merged to max_boxes
+            # (while an older refinement is still coarse, that one goes on instead)
+            pending = Refinement(scan, Subpaving(inner, boundary, coarse))
+        # the report: adjacent boxes joined (the same union, fewer boxes), then, if still too
+        # many, merged into a coarser cover
+        inner, boundary = merge_adjacent(inner), merge_adjacent(boundary)
+        if inner.shape[0] + boundary.shape[0] > s.max_boxes:
             scale = pose_scale(s.heading_scale_m_per_rad)
             merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
-            inner, boundary, coarse = np.zeros((0, 3, 2)), wrap_headings(merged), True
+            merged = wrap_headings(merged)
+            # the merged cells tested once: those the sonar or the room reject hold no pose
+            # of the set (box_test, at the set's relaxation), the rest is the report
+            held = box_test(merged, scan.restricted_to(merged), found.q_set, False, s.engine)
+            if (held != OUTSIDE).any():
+                merged = merged[held != OUTSIDE]
+            inner, boundary, coarse = np.zeros((0, 3, 2)), merged, True
         paving = Subpaving(inner, boundary, coarse)
-        return EpochResult(paving, found.q, status, time.perf_counter() - start, coarse)
+        elapsed_s = time.perf_counter() - start
+        return EpochResult(paving, found.q, status, elapsed_s, coarse, pending)

@@ -29,7 +29,13 @@ import numpy as np
 
 from intervals.boxes import Subpaving
 from intervals.sonar.scan import SonarBelt, SonarScene
-from intervals.tracker import EpochResult, EpochStatus, IntervalTracker, TrackerSettings
+from intervals.tracker import (
+    EpochResult,
+    EpochStatus,
+    IntervalTracker,
+    Refinement,
+    TrackerSettings,
+)
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningHistory,
@@ -169,6 +175,7 @@ class OnlineLocalizer:
         self._samples = _Samples()
         self._dr: DeadReckoning | None = None  # built at the first stretch run
         self._previous: Subpaving | None = None
+        self._refinement: Refinement | None = None  # a coarse set's finer one, never kept
         self._scans = 0
         self._last_epoch_t: float | None = None
         self.epochs: list[EpochRecord] = []
@@ -261,8 +268,9 @@ class OnlineLocalizer:
         dt_s = 0.0 if self._last_epoch_t is None else t_s - self._last_epoch_t
         self._last_epoch_t = t_s
         scan = self._scene.scan(readings)
-        found = self._tracker.step(self._previous, scan, dt_s)
-        self._previous = found.paving
+        found = self._tracker.step(self._previous, scan, dt_s, self._refinement)
+        self._previous, self._refinement = found.paving, found.refinement
+        found = dataclasses.replace(found, refinement=None)
         tick = time.perf_counter()
         before = np.array(belief.mean[FUSED, :3])
         box, component = np.full((3, 2), np.nan), -1

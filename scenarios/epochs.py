@@ -16,7 +16,13 @@ import numpy as np
 
 from intervals.boxes import Subpaving, area_xy, contains_points
 from intervals.sonar.scan import SonarBelt, SonarScene
-from intervals.tracker import EpochResult, EpochStatus, IntervalTracker, TrackerSettings
+from intervals.tracker import (
+    EpochResult,
+    EpochStatus,
+    IntervalTracker,
+    Refinement,
+    TrackerSettings,
+)
 
 #: The epoch states in the order of their codes in :attr:`EpochLog.status`.
 STATUS = tuple(EpochStatus)
@@ -47,13 +53,14 @@ class EpochRunner:
         self._tracker = IntervalTracker(tracker_settings, map_bounds)
         self._scene = SonarScene(segments, belt, boundary)  # the map checked once per run
         self._previous: Subpaving | None = None
+        self._refinement: Refinement | None = None  # a coarse set's finer one, never logged
 
     def step(self, readings_m: np.ndarray, dt_s: float) -> EpochResult:
         """One epoch on the scan ``readings_m (k,)`` taken ``dt_s`` after the previous one."""
         scan = self._scene.scan(readings_m)
-        result = self._tracker.step(self._previous, scan, dt_s)
-        self._previous = result.paving
-        return result
+        result = self._tracker.step(self._previous, scan, dt_s, self._refinement)
+        self._previous, self._refinement = result.paving, result.refinement
+        return dataclasses.replace(result, refinement=None)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

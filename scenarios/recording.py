@@ -58,8 +58,9 @@ The localisation pipeline (when the run has an estimation):
   box of its last clamp from the first clamp on (class ``fused_box``);
 - ``intervals/box_width_m`` (the larger side of the hull of the set), ``intervals/area_m2``,
   ``intervals/epoch_ms``, ``intervals/status`` (the index of ``scenarios.epochs.STATUS``:
-  0 global, 1 tracking, 2 inconsistent, 3 lost) and ``intervals/q_used``: per-epoch figures,
-  ``Scalars`` (E) styled by ``SeriesLines``;
+  0 global, 1 tracking, 2 inconsistent, 3 lost), ``intervals/q_used`` and
+  ``intervals/coarse`` (1 where the budget ``max_boxes`` made the set a coarser cover, else 0):
+  per-epoch figures, ``Scalars`` (E) styled by ``SeriesLines``;
 - ``errors/position_m/<branch>``, ``errors/heading_rad/<branch>``: estimation errors,
   ``Scalars`` at the same samples as the estimates, in the branch's colour.
 
@@ -290,6 +291,11 @@ EPOCH_SERIES = {
         (250, 230, 80, 255),
         interpolation=rr.components.InterpolationMode.StepAfter,
     ),
+    "intervals/coarse": SeriesStyle(
+        "coarse: 1 where the budget (max_boxes) coarsened the set",
+        (240, 120, 60, 255),
+        interpolation=rr.components.InterpolationMode.StepAfter,
+    ),
 }
 
 
@@ -509,9 +515,10 @@ def default_blueprint(
             y_range=epoch_ms_range,
         ),
         plot(
-            "epoch status and outliers q (steps)",
+            "epoch status, outliers q and coarse (steps)",
             "/intervals/status",
             "/intervals/q_used",
+            "/intervals/coarse",
             y_range=STATUS_AXIS,
         ),
         name="localisation",
@@ -1146,6 +1153,7 @@ def record_interval_sets(rec: rr.RecordingStream, epochs: EpochLog) -> None:
         "intervals/epoch_ms": epochs.elapsed_s * 1e3,
         "intervals/status": epochs.status.astype(np.float64),
         "intervals/q_used": epochs.q_used.astype(np.float64),
+        "intervals/coarse": epochs.coarse.astype(np.float64),
     }
     for entity, series in values.items():
         send_series(rec, entity, epochs.t_s, series, EPOCH_SERIES[entity])

@@ -363,3 +363,65 @@ def test_touching_pairs_of_mixed_sizes_and_by_sweep():
         expected = _pair_set(i, j)
         assert _pair_set(*bx.touching_pairs(boxes, periodic)) == expected
         assert _pair_set(*bx.sweep_pairs(boxes, periodic, 2.0 * np.pi)) == expected
+
+
+def test_merge_adjacent_keeps_the_union_exactly_in_fewer_boxes():
+    """Random subsets of a regular grid of pose cells (exact binary bounds, so neighbours
+    share bounds) and the boundary of a real SIVIA paving: the merged boxes hold every
+    point of the input and no point outside it (checked on points of the merged boxes,
+    against the input boxes), they do not overlap (volume equal to the input's), and a full
+    row of cells becomes one box."""
+    rng = np.random.default_rng(8)
+    cells = np.stack(np.meshgrid(*(np.arange(n) for n in (16, 8, 4)), indexing="ij"), -1)
+    cells = cells.reshape(-1, 3) * 0.125
+    for share in (0.3, 0.7, 1.0):
+        lo = cells[rng.random(len(cells)) < share]
+        boxes = np.stack([lo, lo + 0.125], axis=-1)
+        merged = bx.merge_adjacent(boxes)
+        assert merged.shape[0] < boxes.shape[0]
+        assert bx.volume(merged) == pytest.approx(bx.volume(boxes), rel=1e-12)
+        inside = rng.uniform(boxes[..., 0], boxes[..., 1])
+        assert bx.contains_points(merged, inside).any(axis=0).all()
+        # points strictly inside merged boxes lie in some input box
+        probe = rng.uniform(merged[..., 0], merged[..., 1])
+        assert bx.contains_points(boxes, probe).any(axis=0).all()
+    assert bx.merge_adjacent(np.stack([cells, cells + 0.125], axis=-1)).shape[0] == 1
+    landmarks = np.array([[0.0, 0.0], [4.0, 0.0]])
+    paving = sivia(
+        range_only_test(landmarks, np.array([[2.0, 2.6], [2.4, 3.0]])),
+        np.array([[-5.0, 5.0], [-5.0, 5.0]]),
+        eps=0.02,
+    )
+    merged = bx.merge_adjacent(paving.boundary)
+    assert merged.shape[0] < 0.75 * paving.boundary.shape[0]
+    assert bx.volume(merged) == pytest.approx(bx.volume(paving.boundary), rel=1e-12)
+    assert bx.area_xy(merged) == pytest.approx(bx.area_xy(paving.boundary), rel=1e-12)
+    probe = rng.uniform(merged[..., 0], merged[..., 1])
+    assert bx.contains_points(paving.boundary, probe).any(axis=0).all()
+
+
+def test_sivia_under_a_budget_bisects_the_lowest_scores_first():
+    """A test that scores every box by its distance to a target point: under a budget SIVIA
+    reaches eps next to the target first (the boxes it left whole lie away from it), without
+    a budget the scores change nothing (the same boxes, in the same order)."""
+    target = np.array([3.0, -2.0])
+
+    def scored(boxes):
+        verdicts = np.full(boxes.shape[0], UNDECIDED, np.int8)
+        return verdicts, np.linalg.norm(bx.centres(boxes) - target, axis=1)
+
+    def plain(boxes):
+        return scored(boxes)[0]
+
+    box = np.array([[-5.0, 5.0], [-5.0, 5.0]])
+    np.testing.assert_array_equal(
+        sivia(scored, box, eps=0.3).boundary, sivia(plain, box, eps=0.3).boundary
+    )
+    cut = sivia(scored, box, eps=0.01, max_boxes=200, max_tested=3000)
+    fine = bx.max_width(cut.boundary) <= 0.01
+    assert cut.coarse and fine.any() and (~fine).any()
+    assert cut.contains(target[None])[0]
+    near = np.linalg.norm(bx.centres(cut.boundary[fine]) - target, axis=1).max()
+    far = np.linalg.norm(bx.centres(cut.boundary[~fine]) - target, axis=1).min()
+    assert near < far + 0.5  # the fine boxes cluster round the target
+    assert near < 1.0

@@ -311,6 +311,33 @@ def test_series_are_styled_in_the_colours_of_the_map(clamp_run):
     assert "0 global" in data[("/intervals/status", False)]["SeriesLines:names"][0][0]
 
 
+def test_coarse_epochs_are_in_the_recording(tmp_path):
+    """A hall run under a budget of 24 boxes: its coarse epochs, as the epoch log has them,
+    are read back from ``/intervals/coarse``, one scalar per epoch at the epoch's time, 1
+    where coarse and 0 elsewhere."""
+    import dataclasses
+
+    from scenarios.recording import write_recording
+    from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
+
+    spec = load_scenario("hall").with_run(duration_s=8.0)
+    intervals = dataclasses.replace(spec.estimation.intervals, max_boxes=24)
+    spec = dataclasses.replace(
+        spec, estimation=dataclasses.replace(spec.estimation, intervals=intervals)
+    )
+    result = run_scenario(spec)
+    epochs = result.estimation.epochs
+    assert np.count_nonzero(epochs.coarse) > 0  # the budget bit
+    path = tmp_path / "coarse.rrd"
+    write_recording(path, spec, result.log, result.estimation)
+    (columns,) = [c for rows, c in logged_data(path)[("/intervals/coarse", False)] if rows]
+    read = np.array([row[0] for row in columns["Scalars:scalars"]])
+    np.testing.assert_array_equal(read, epochs.coarse.astype(np.float64))
+    times_ns = np.array(columns["time"], dtype=np.int64)
+    np.testing.assert_array_equal(times_ns, np.round(epochs.t_s * 1e9).astype(np.int64))
+
+
 def blueprint_views(path) -> dict[str, dict]:
     """The views of the recording's blueprint read back, by display name: class, origin,
     contents, visual bounds, time ranges and per-entity overrides."""
@@ -368,7 +395,7 @@ def test_the_blueprint_has_the_map_the_plots_by_unit_and_the_raw_sensors(clamp_r
     assert unit[("/errors/heading_rad/**",)] == "rad"
     assert unit[("/intervals/area_m2",)] == "m²" and unit[("/intervals/epoch_ms",)] == "ms"
     (status,) = [v for v in plots.values() if "/intervals/status" in v["contents"]]
-    assert status["contents"] == ["/intervals/status", "/intervals/q_used"]
+    assert status["contents"] == ["/intervals/status", "/intervals/q_used", "/intervals/coarse"]
     # raw sensors in their own views, a window before the cursor; the others the whole run
     raw = [v for v in plots.values() if v["contents"][0].startswith(("/sensors", "/truth"))]
     assert {v["contents"][0].split("/")[1] for v in raw} == {"sensors", "truth"} and len(raw) == 5
