@@ -30,6 +30,9 @@ Entity paths (the tests read them back):
 - ``world``: the y-up ``Transform3D`` and the ``AnnotationContext``, static;
 - ``world/map/walls``: the map segments, static ``LineStrips2D``;
 - ``world/legend``: one labelled point per class drawn, static ``Points2D``;
+- ``world/obstacles/static``: the edges of the unmapped obstacles that stand still (``[world]
+  obstacles``), static ``LineStrips2D``; ``world/obstacles/moving``: the edges of the moving
+  ones at every ``ESTIMATE_STRIDE``-th sample, ``LineStrips2D`` (rows of e strips);
 - ``world/robot/path``: the whole true trajectory, static faint ``LineStrips2D``;
 - ``world/robot/trail``: one segment per ``TRAIL_STRIDE`` samples, ``LineStrips2D``, shown
   for the last ``TRAIL_WINDOW_S`` seconds up to the cursor;
@@ -93,6 +96,7 @@ from scenarios.outputs import write_bytes
 from scenarios.runner import BRANCHES
 
 if TYPE_CHECKING:
+    from robotsim.obstacles import Obstacles
     from robotsim.sensors.sonar import SonarBeltParams
     from robotsim.simulation import SimulationLog
     from scenarios.epochs import EpochLog
@@ -197,6 +201,14 @@ CLASSES = {
         11, "echo", (250, 230, 80, 255), "yellow", "the reading on the sensor's axis"
     ),
     "wall": DrawClass(12, "wall", (215, 215, 215, 255), "light grey", "the map's segments"),
+    "obstacle": DrawClass(
+        13,
+        "unmapped obstacle",
+        (205, 125, 60, 255),
+        "brown",
+        "what the world holds that the estimator's map lacks (`[world] obstacles`): the "
+        "physics and the sonar see it, the estimator does not",
+    ),
 }
 #: The branches' classes, in :data:`scenarios.runner.BRANCHES` order.
 BRANCH_CLASSES = {branch: CLASSES[branch] for branch in BRANCHES}
@@ -403,11 +415,12 @@ def record_all(
     """Everything the recording holds, sent to ``rec``: the frame and the classes, the run,
     and the estimation (if any: the interval pipeline's or the particle filter's)."""
     if isinstance(estimation, MclEstimation):
-        record_frame(rec, spec.map.bounds, None, mcl=True)
+        record_frame(rec, spec.map.bounds, None, mcl=True, obstacles=bool(spec.obstacles))
         record_run(rec, spec, log)
         record_mcl(rec, log, estimation)
         return
-    record_frame(rec, spec.map.bounds, spec.estimation.fusion if estimation is not None else None)
+    fusion_rule = spec.estimation.fusion if estimation is not None else None
+    record_frame(rec, spec.map.bounds, fusion_rule, obstacles=bool(spec.obstacles))
     record_run(rec, spec, log)
     if estimation is not None:
         record_estimation(rec, spec, log, estimation)
@@ -417,7 +430,8 @@ def map_view_bounds(bounds: np.ndarray) -> tuple[tuple[float, float], tuple[floa
     """The map view's fixed ``x_range, y_range`` in the view's (y-down) frame: the map
     ``bounds [[xmin, xmax], [ymin, ymax]]`` metres with a margin, and the legend under it."""
     (x0, x1), (y0, y1) = np.asarray(bounds, dtype=float)
-    legend_rows = -(-len(legend_classes("clamp")) // LEGEND_COLUMNS)  # the longest legend
+    longest = legend_classes("clamp", obstacles=True)
+    legend_rows = -(-len(longest) // LEGEND_COLUMNS)
     bottom = y0 - MAP_MARGIN_M - (legend_rows + 1) * LEGEND_ROW_M
     return (x0 - MAP_MARGIN_M, x1 + MAP_MARGIN_M), (-(y1 + MAP_MARGIN_M), -bottom)
 
@@ -548,12 +562,17 @@ def default_blueprint(
     )
 
 
-def legend_classes(fusion_rule: str | None, mcl: bool = False) -> list[DrawClass]:
+def legend_classes(
+    fusion_rule: str | None, mcl: bool = False, obstacles: bool = False
+) -> list[DrawClass]:
     """The classes the legend lists: everything drawn in a run with the estimation's
-    ``fusion_rule`` (``None``: no interval pipeline); the MCL slot only when it is drawn."""
+    ``fusion_rule`` (``None``: no interval pipeline); the MCL and unmapped-obstacle slots only
+    when they are drawn."""
     drawn = ["truth", "wall", "cone_echo", "cone_no_echo", "echo"]
     if mcl:
         drawn.append("mcl")
+    if obstacles:
+        drawn.append("obstacle")
     if fusion_rule is not None:
         drawn += ["ukf_only", "fused", "outer_box", "inner_box", "hull"]
         drawn.append(fused_outline_class(fusion_rule))
@@ -561,11 +580,16 @@ def legend_classes(fusion_rule: str | None, mcl: bool = False) -> list[DrawClass
 
 
 def record_frame(
-    rec: rr.RecordingStream, bounds: np.ndarray, fusion_rule: str | None, mcl: bool = False
+    rec: rr.RecordingStream,
+    bounds: np.ndarray,
+    fusion_rule: str | None,
+    mcl: bool = False,
+    obstacles: bool = False,
 ) -> None:
     """The y-up transform and the annotation context on ``world``, the legend under the map
     ``bounds (2, 2)`` (:data:`LEGEND_COLUMNS` columns of labelled points) and the notes that
-    explain it, static (``mcl``: the particle filter's run)."""
+    explain it, static (``mcl``: the particle filter's run; ``obstacles``: the world has
+    unmapped obstacles)."""
     # one row (one call): the batcher may split or merge separate calls by wall-clock timing
     rec.log(
         WORLD,
@@ -575,7 +599,7 @@ def record_frame(
         ),
         static=True,
     )
-    shown = legend_classes(fusion_rule, mcl)
+    shown = legend_classes(fusion_rule, mcl, obstacles)
     (x0, x1), (y0, _) = np.asarray(bounds, dtype=float)
     column, row = np.divmod(np.arange(len(shown)), LEGEND_COLUMNS)[::-1]
     positions = np.stack(
@@ -624,6 +648,7 @@ def legend_notes(shown: list[DrawClass]) -> str:
 def record_run(rec: rr.RecordingStream, spec: ScenarioSpec, log: SimulationLog) -> None:
     """Send the map, the truth, the sonar scans and the sensor series of one run to ``rec``."""
     record_map(rec, spec.map.segments)
+    record_obstacles(rec, spec.obstacles, log.t_s[::ESTIMATE_STRIDE])
     record_truth(rec, log.t_s, log.pose, log.velocity, spec.robot.radius_m)
     record_sonar(rec, log.sonar_t_s, log.sonar_pose, log.sonar_range_m, spec.sensors.sonar)
     record_proprioceptive(rec, log.t_s, log.wheel_ticks, log.gyro_rad_s, log.accel_m_s2)
@@ -640,6 +665,32 @@ def record_map(rec: rr.RecordingStream, segments: np.ndarray) -> None:
             draw_order=DRAW_ORDER["walls"],
         ),
         static=True,
+    )
+
+
+def record_obstacles(rec: rr.RecordingStream, obstacles: Obstacles, t_s: np.ndarray) -> None:
+    """The unmapped obstacles: the edges of those that stand still, static, and those of the
+    moving ones at the times ``t_s (n,)``, s (nothing when the world has none)."""
+    style = {"class_ids": CLASSES["obstacle"].id, "radii": rr.Radius.ui_points(WALL_WIDTH)}
+    if len(obstacles.static_edges_m):
+        rec.log(
+            f"{WORLD}/obstacles/static",
+            rr.LineStrips2D(obstacles.static_edges_m, draw_order=DRAW_ORDER["walls"], **style),
+            static=True,
+        )
+    if not obstacles.moving or not len(t_s):
+        return
+    edges = obstacles.moving_edges_m(t_s)  # (n, e, 2, 2)
+    n, e = edges.shape[:2]
+    rec.send_columns(
+        f"{WORLD}/obstacles/moving",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t_s)],
+        columns=rr.LineStrips2D.columns(
+            strips=edges.reshape(n * e, 2, 2),
+            class_ids=np.full(n * e, CLASSES["obstacle"].id, dtype=np.uint16),
+            radii=np.full(n * e, rr.Radius.ui_points(WALL_WIDTH), dtype=np.float32),
+            draw_order=np.full(n * e, DRAW_ORDER["walls"], dtype=np.float32),
+        ).partition(np.full(n, e)),
     )
 
 

@@ -629,3 +629,38 @@ def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
     assert rows(received) == rows(rrd)
     assert len(RrdReader(received).blueprints()) == 1
     assert blueprint_views(received).keys() == blueprint_views(rrd).keys()
+
+
+def test_unmapped_obstacles_are_drawn_where_the_simulator_had_them(tmp_path):
+    """``apartment_lived_in``: its still obstacles read back as static strips equal to their
+    edges, its walking person as strips at the estimate samples equal to the obstacle's edges
+    at those times (it moves), all in the ``obstacle`` class, which the legend lists."""
+    from scenarios.recording import CLASSES, ESTIMATE_STRIDE, write_recording
+    from scenarios.runner import run_scenario
+    from scenarios.spec import load_scenario
+
+    spec = load_scenario("apartment_lived_in").with_run(duration_s=4.0)
+    assert len(spec.obstacles.static_edges_m) and spec.obstacles.moving
+    result = run_scenario(spec)
+    path = tmp_path / "lived_in.rrd"
+    write_recording(path, spec, result.log, result.estimation)
+    data = entity_columns(path)
+    still = data[("/world/obstacles/static", True)]
+    (strips,) = still["LineStrips2D:strips"]
+    np.testing.assert_allclose(np.array(strips), spec.obstacles.static_edges_m, atol=1e-5)
+    moving = data[("/world/obstacles/moving", False)]
+    t_s = result.log.t_s[::ESTIMATE_STRIDE]
+    np.testing.assert_array_equal(np.array(moving["time"]), np.round(t_s * 1e9).astype(np.int64))
+    expected = spec.obstacles.moving_edges_m(t_s)
+    read = np.array([np.array(row) for row in moving["LineStrips2D:strips"]])
+    np.testing.assert_allclose(read, expected, rtol=0, atol=1e-5)  # float32 on the wire
+    assert np.ptp(read[:, :, :, 0]) > 0.1 or np.ptp(read[:, :, :, 1]) > 0.1  # it moved
+    obstacle = CLASSES["obstacle"].id
+    assert {obstacle} == set(np.concatenate(moving["LineStrips2D:class_ids"]).tolist())
+    assert obstacle in set(
+        only(data[("/world/obstacles/static", True)]["LineStrips2D:class_ids"])
+        if False
+        else still["LineStrips2D:class_ids"][0]
+    )
+    legend = data[("/world/legend", True)]["Points2D:class_ids"][0]
+    assert obstacle in legend
