@@ -671,11 +671,15 @@ def record_map(rec: rr.RecordingStream, segments: np.ndarray) -> None:
 def record_obstacles(rec: rr.RecordingStream, obstacles: Obstacles, t_s: np.ndarray) -> None:
     """The unmapped obstacles: the edges of those that stand still, static, and those of the
     moving ones at the times ``t_s (n,)``, s (nothing when the world has none)."""
-    style = {"class_ids": CLASSES["obstacle"].id, "radii": rr.Radius.ui_points(WALL_WIDTH)}
     if len(obstacles.static_edges_m):
         rec.log(
             f"{WORLD}/obstacles/static",
-            rr.LineStrips2D(obstacles.static_edges_m, draw_order=DRAW_ORDER["walls"], **style),
+            rr.LineStrips2D(
+                obstacles.static_edges_m,
+                class_ids=CLASSES["obstacle"].id,
+                radii=rr.Radius.ui_points(WALL_WIDTH),
+                draw_order=DRAW_ORDER["walls"],
+            ),
             static=True,
         )
     if not obstacles.moving or not len(t_s):
