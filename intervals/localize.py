@@ -112,6 +112,12 @@ def _checked_contract(contract) -> bool:
     return contract
 
 
+def _checked_rounds(rounds) -> int:
+    if not (isinstance(rounds, (int, np.integer)) and not isinstance(rounds, bool) and rounds >= 0):
+        raise IntervalError(f"shave_rounds must be an integer >= 0, got {rounds!r}")
+    return int(rounds)
+
+
 def _initial_poses(initial) -> np.ndarray:
     boxes = as_boxes(initial, "initial pose boxes")
     if boxes.shape[1] != 3:
@@ -143,6 +149,7 @@ def _pave(
     max_kept=None,
     within=None,
     contract=True,
+    shave_rounds=0,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
     number of sensors rejecting each boundary box (``merged``: see below), kept from the
@@ -171,8 +178,9 @@ def _pave(
     With ``contract`` every SIVIA frontier is first contracted by
     :func:`intervals.sonar.contractor.contract` at the same ``q`` (it keeps every pose with at
     most ``q`` wrong readings, so the set and the counts stay sound), and the boundary boxes of
-    a paving not cut short are shaved (:func:`_shaved`), within the budget's tests when there
-    is one (fewer rounds, or none, when the tests left do not allow them).
+    a paving not cut short are shaved (:func:`_shaved`, ``shave_rounds`` rounds), within the
+    budget's tests when there is one (fewer rounds, or none, when the tests left do not allow
+    them).
     """
     stored, counts, tested = [], [], [0]
     if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
@@ -229,7 +237,7 @@ def _pave(
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
         n = paving.boundary.shape[0]
-        rounds = contractor.SHAVE_ROUNDS
+        rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
             rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
         if contract and n and rounds:
@@ -298,6 +306,7 @@ def localize(
     max_boxes: int | None = None,
     max_kept: int | None = None,
     contract: bool = True,
+    shave_rounds: int = 0,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
@@ -319,7 +328,9 @@ def localize(
     :class:`intervals.tracker.Refinement`).
     ``contract``: contract every SIVIA frontier by :mod:`intervals.sonar.contractor` before
     the test (the same set or a tighter one: it only removes poses with more than ``q`` wrong
-    readings).
+    readings). ``shave_rounds``: with ``contract``, rounds of
+    :func:`intervals.sonar.contractor.shave` on the boxes kept (0: none; each round tighter and
+    dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`).
     """
     _checked_q(q)
     _checked_budget(max_boxes)
@@ -340,6 +351,7 @@ def localize(
         max_kept,
         None,
         _checked_contract(contract),
+        _checked_rounds(shave_rounds),
     )[0]
 
 
@@ -379,6 +391,7 @@ def gomne(
     splits_per_level: int = 3,
     within=None,
     contract: bool = True,
+    shave_rounds: int = 0,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -391,8 +404,8 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level`` and
-    ``contract``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
+    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``
+    and ``shave_rounds``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
     2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
     component): SIVIA rejects the boxes meeting none of them without testing them, so the
     set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
@@ -419,6 +432,7 @@ def gomne(
         max_kept,
         None if within is None or len(within) > MAX_WITHIN_REGIONS else within,
         _checked_contract(contract),
+        _checked_rounds(shave_rounds),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
@@ -436,6 +450,7 @@ def gomne(
                 max_boxes=max_boxes,
                 max_kept=max_kept,
                 contract=contract,
+                shave_rounds=shave_rounds,
             )
             if not minimal.is_empty:
                 break

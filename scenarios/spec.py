@@ -154,6 +154,7 @@ TRACKER_KEYS = (
     "ray_test",
     "max_boxes",
     "contractor",
+    "shave_rounds",
 )
 
 

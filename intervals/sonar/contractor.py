@@ -93,7 +93,8 @@ DEFAULT_PASSES = 2
 ``Q_i`` are narrower); a box the first pass leaves unchanged stops there."""
 
 SHAVE_ROUNDS = 2
-"""Rounds of :func:`shave` (each: the six faces, then :func:`contract`). Measured on one of
+"""Rounds of :func:`shave` when its caller does not say (each: the six faces, then
+:func:`contract`; the pipeline's are ``[estimation] shave_rounds``, default 0). Measured on one of
 ``hall``'s tracking epochs at eps 0.05 (21 boxes): the outer volume becomes 0.58 of the
 unshaved after one round, 0.47 after two, 0.43 after four, the consistent volume unchanged;
 on the codac ray problem 4 rounds take another sixth off (``benchmarks/intervals_vs_codac.py``).

@@ -223,9 +223,9 @@ def test_sivia_drops_emptied_rows_clips_to_the_input_and_stays_sound():
 def test_localize_and_gomne_with_the_contractor_keep_the_truth_in_smaller_sets():
     """Default belt and a thin cone, random rooms: the paved set with the contractor holds the
     truth whenever the set without it does (always here: no outliers), and is smaller on
-    average."""
+    average; shaving (2 rounds) keeps the truth in a set no larger than the contracted one."""
     rng = np.random.default_rng(11)
-    ratios = []
+    ratios, shaved_ratios = [], []
     for case in range(12):
         gamma = np.deg2rad(12.5) if case % 2 else 0.05
         scan, _, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 3 == 0))
@@ -233,9 +233,16 @@ def test_localize_and_gomne_with_the_contractor_keep_the_truth_in_smaller_sets()
         plain = localize(scan, prior, 0.05, q=1, contract=False)
         tight = localize(scan, prior, 0.05, q=1)
         assert plain.contains(truth[None])[0] and tight.contains(truth[None])[0]
+        shaved = localize(scan, prior, 0.05, q=1, shave_rounds=2)
+        assert shaved.contains(truth[None])[0] and shaved.volume() <= tight.volume()
         found = gomne(scan, prior, 0.05, q_max=1)
         assert found.consistent and found.paving.contains(truth[None])[0]
+        found = gomne(scan, prior, 0.05, q_max=1, shave_rounds=2)
+        assert found.consistent and found.paving.contains(truth[None])[0]
         ratios.append(tight.volume() / plain.volume())
-    assert np.mean(ratios) < 1.0
+        shaved_ratios.append(shaved.volume() / tight.volume())
+    assert np.mean(ratios) < 1.0 and np.mean(shaved_ratios) < 1.0
     with pytest.raises(IntervalError, match="contract must be"):
         localize(scan, prior, 0.05, contract=1)  # type: ignore[arg-type]
+    with pytest.raises(IntervalError, match="shave_rounds must be"):
+        localize(scan, prior, 0.05, shave_rounds=-1)

@@ -260,6 +260,11 @@ BAD = {
         "estimation.contractor",
         "true or false",
     ),
+    "estimation shave rounds": (
+        "[estimation]\nshave_rounds = 9\n",
+        "estimation.shave_rounds",
+        "<= 8",
+    ),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -344,6 +349,8 @@ def test_estimation_defaults_and_values():
     assert (
         parse(BASE + "[estimation]\ncontractor = false\n").estimation.intervals.contractor is False
     )
+    assert spec.estimation.intervals.shave_rounds == 0  # off by default
+    assert parse(BASE + "[estimation]\nshave_rounds = 2\n").estimation.intervals.shave_rounds == 2
     assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
 
