@@ -321,9 +321,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.child:
         return child(args.child, args.duration, args.out)
 
-    from scenarios.spec import builtin_names
+    from scenarios.mcl_pipeline import Estimator
+    from scenarios.spec import builtin_names, load_scenario
 
-    known = (*builtin_names(), *VARIANTS)
+    # the interval stage's benchmark: the particle filter's scenarios are benchmarks/mcl.py's
+    interval_plans = [
+        name
+        for name in builtin_names()
+        if load_scenario(name).estimation.estimator == Estimator.INTERVALS
+    ]
+    known = (*interval_plans, *VARIANTS)
     plans = args.plans or list(known)
     unknown = [plan for plan in plans if plan not in known]
     if unknown:
