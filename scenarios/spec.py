@@ -430,8 +430,13 @@ class ScenarioSpec:
         return dataclasses.replace(self, run=run)
 
     def with_estimation(self, **changes: Any) -> ScenarioSpec:
-        """This scenario with keys of ``[estimation]`` replaced (:meth:`EstimationSpec.with_keys`)."""
-        return dataclasses.replace(self, estimation=self.estimation.with_keys(**changes))
+        """This scenario with keys of ``[estimation]`` replaced (:meth:`EstimationSpec.with_keys`).
+        Switching to ``estimator = "mcl"`` also puts the route on the truth (``follow``), as a
+        scenario file with that estimator gets by default: the closed loop steers on the
+        interval pipeline's estimate, which an MCL run does not have."""
+        estimation = self.estimation.with_keys(**changes)
+        follow = Follow.TRUTH if estimation.estimator == Estimator.MCL else self.follow
+        return dataclasses.replace(self, estimation=estimation, follow=follow)
 
 
 # ---------------------------------------------------------------------------------------

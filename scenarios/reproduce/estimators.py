@@ -14,8 +14,9 @@ Five estimators on the same simulated worlds (common random numbers, seed by see
 Each built-in plan of :data:`SCENARIOS` runs twice: as shipped (no sensor faults) and as
 ``<name>_faults``: sonar outliers (``outlier_prob``) and lost echoes (``lost_echo_prob``),
 :data:`FAULTS`, and a kidnapping halfway through the run to the free pose farthest from the
-route (no odometry of the jump). Unmapped obstacles are not among the faults: the
-simulator has no obstacles outside the map yet.
+route (no odometry of the jump). Unmapped obstacles (``[world] obstacles``) are not among
+the faults yet. Every run follows its route on the true pose (``[route] follow = "truth"``):
+the same world for every estimator, seed by seed.
 
 It is an ordinary campaign (``scenarios.campaign``): the scenario files and the campaign
 file are written to ``DIR/inputs/`` (``robotsim campaign DIR/inputs/estimators.toml`` runs
@@ -161,6 +162,9 @@ def scenario_variants(name: str, duration_s: float) -> dict[str, dict[str, Any]]
     and the duration."""
     clean = builtin_tables(name)
     clean.setdefault("run", {})["duration_s"] = duration_s
+    # the robot follows its route on the true pose, so that every estimator sees the same
+    # world seed by seed (a closed loop would steer each run on its own estimate)
+    clean.setdefault("route", {})["follow"] = "truth"
     clean.setdefault("estimation", {})["mcl"] = dict(MCL_SETTINGS)
     faulty = json.loads(json.dumps(clean))
     faulty.setdefault("sensors", {}).setdefault("sonar", {}).update(FAULTS)

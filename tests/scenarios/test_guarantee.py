@@ -307,7 +307,13 @@ def test_every_reproduction_writes_under_runs_reproduce_by_default():
     from scenarios.reproduce import experiments
 
     found = experiments()
-    assert set(found) == {"iukf-examples", "mukf-example", "motion-models", "ia-fusion"}
+    assert set(found) == {
+        "iukf-examples",
+        "mukf-example",
+        "motion-models",
+        "ia-fusion",
+        "estimators",
+    }
     for name, module in found.items():
         parser = argparse.ArgumentParser()
         module.add_arguments(parser)
