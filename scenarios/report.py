@@ -217,7 +217,8 @@ def paired_markdown(records: list[dict[str, Any]], names: list[str]) -> str:
 
 
 def figures(records: list[dict[str, Any]], folder: Path) -> list[Path]:
-    """The three PNG figures of the report, in ``folder``."""
+    """The four PNG figures of the report, in ``folder``: errors, containment and set area,
+    time per epoch, kidnap recovery."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -255,6 +256,19 @@ def figures(records: list[dict[str, Any]], folder: Path) -> list[Path]:
     written.append(folder / "time_per_epoch.png")
     fig.savefig(written[-1], dpi=100)
     plt.close(fig)
+
+    fig, axis = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    boxplots(axis, "kidnaps.0.recovery_s", "first kidnap: time to recover (s; recovered runs)")
+    for place, record in enumerate(records, start=1):  # the share recovered, at the top
+        share = record["figures"]["kidnaps.0.recovered"]
+        text = "no kidnap" if share[2] == 0 else f"{share[0]:.0%} of {share[2]} recovered"
+        axis.annotate(
+            text, (place, 0.98), xycoords=("data", "axes fraction"), ha="center", va="top"
+        )
+    axis.set_ylim(bottom=0.0, top=axis.get_ylim()[1] * 1.12)  # room for the shares
+    written.append(folder / "kidnap_recovery.png")
+    fig.savefig(written[-1], dpi=100)
+    plt.close(fig)
     return written
 
 
@@ -287,5 +301,8 @@ def main(args: argparse.Namespace) -> int:
         (tmp / "report.md").write_text(table, encoding="utf-8")
         figures(records, tmp)
     print(table, end="")
-    print(f"wrote {out}/report.md, errors.png, containment_area.png, time_per_epoch.png")
+    print(
+        f"wrote {out}/report.md, errors.png, containment_area.png, time_per_epoch.png, "
+        "kidnap_recovery.png"
+    )
     return 0

@@ -57,7 +57,7 @@ def test_report_writes_its_table_and_figures_and_never_replaces_a_foreign_folder
     assert main(["report", str(tmp_path / "results.parquet")]) == 0
     out = tmp_path / "report"
     assert "| hall | clamp | 3 | 0 |" in (out / "report.md").read_text()
-    for name in ("errors.png", "containment_area.png", "time_per_epoch.png"):
+    for name in ("errors.png", "containment_area.png", "time_per_epoch.png", "kidnap_recovery.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["report", str(tmp_path)]) == 0  # a previous report is replaced
 
