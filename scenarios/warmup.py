@@ -63,9 +63,11 @@ def warm_runs() -> None:
 
 def warm_filters() -> None:
     """A UKF step (additive and augmented process noise) and an EKF step of every motion
-    model, each a prediction then a GPS and a pose update, on a batch of two runs."""
+    model, each a prediction then a GPS and a pose update, on a batch of two runs; and the
+    same filters' lean entries, a step and a sequence, on one run."""
     import numpy as np
 
+    from localization.compiled.lean import LeanEKF, LeanUKF
     from localization.ekf import ExtendedKalmanFilter
     from localization.gaussian import Gaussian
     from localization.models import ProcessNoise
@@ -95,6 +97,18 @@ def warm_filters() -> None:
             belief = kalman.update(belief, np.zeros((2, 2)), gps)
             if 2 in model.angle_indices:  # the pose model reads the heading as entry 2
                 kalman.update(belief, np.zeros((2, 3)), pose)
+        # the lean entries (localization.compiled.lean): a step and a sequence of each
+        one = Gaussian(np.full(model.n, 0.1), np.eye(model.n), model.angle_indices)
+        for measurement in (gps, pose) if 2 in model.angle_indices else (gps,):
+            z = np.zeros((1, measurement.R.shape[0]))
+            for kalman, process in steps:
+                lean = (
+                    LeanEKF(process, measurement, one, dt_s)
+                    if isinstance(kalman, ExtendedKalmanFilter)
+                    else LeanUKF(kalman, process, measurement, one, dt_s)
+                )
+                lean.step(z[0])
+                lean.run(z)
 
 
 #: The parts of the warm-up, in the order they run.
