@@ -123,7 +123,7 @@ def test_the_readme_is_short_and_keeps_the_commands_ci_runs():
     assert len(text.splitlines()) <= 150
     # .ci/run installs and tests exactly as these blocks say
     assert "```sh\npip install .\nrobotsim run\n```" in text
-    assert '```sh\npip install ".[test]"\npytest\n```' in text
+    assert '```sh\npip install -e ".[test]"\nrobotsim warmup\npytest\n```' in text
     assert 'pip install -e ".[dev]"' in text and "pre-commit install" in text
 
 
