@@ -572,6 +572,8 @@ def free_port() -> int:
 def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
     """``robotsim run --connect HOST:PORT`` streams to a running rerun server (here one that
     saves what it receives): the same entities and rows as the file, and the blueprint."""
+    import os
+    import signal
     import subprocess
     import sys
     import time
@@ -582,10 +584,11 @@ def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
     port = free_port()
     received = tmp_path / "received.rrd"
     rerun_cli = str(Path(sys.executable).with_name("rerun"))
-    server = subprocess.Popen(
+    server = subprocess.Popen(  # its own process group: the entry point runs the binary
         [rerun_cli, "--port", str(port), "--save", str(received)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,
     )
     try:
         import socket
@@ -616,8 +619,8 @@ def test_connect_streams_the_recording_and_its_blueprint_to_a_viewer(tmp_path):
             assert time.monotonic() < deadline, "nothing received"
             time.sleep(0.2)
         time.sleep(1.0)
-    finally:
-        server.terminate()
+    finally:  # the whole group: terminating the entry point alone left the binary running
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=30)
 
     def rows(path) -> dict:
