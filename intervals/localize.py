@@ -57,17 +57,17 @@ costs about 5 ms an epoch (more than the rest of the epoch): worth it on thin co
 (``ray_test=True``) on wide ones."""
 
 
-def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, engine: str):
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
     of sensors rejecting each box, and which."""
-    reject, certain = sensor_verdicts(boxes, scan, inner, engine)
+    reject, certain = sensor_verdicts(boxes, scan, inner)
     rejects = np.count_nonzero(reject, axis=1)
     out = rejects > q
     inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
     if scan.boundary is not None:
         # the in-room test only matters for the boxes the sensors do not reject
         live = np.flatnonzero(~out)
-        room_out, room_in = room_verdicts(boxes[live], scan.boundary, engine)
+        room_out, room_in = room_verdicts(boxes[live], scan.boundary)
         out[live] |= room_out
         inside[live] &= room_in
     verdicts = np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
@@ -87,13 +87,11 @@ MAX_WITHIN_REGIONS = 256
 boxes with every region."""
 
 
-def box_test(
-    boxes, scan: SonarScan, q: int = 0, inner: bool = True, engine: str = "compiled"
-) -> np.ndarray:
+def box_test(boxes, scan: SonarScan, q: int = 0, inner: bool = True) -> np.ndarray:
     """SIVIA test ``(N,) int8``: OUTSIDE when the in-room test or more than ``q`` sensors reject
     the box, INSIDE when (``inner``) it is inside the room and at most ``q`` sensors are not
-    certainly satisfied, else UNDECIDED. ``engine``: see :func:`intervals.sonar.cone.sensor_verdicts`."""
-    return _test_and_counts(as_boxes(boxes), scan, q, inner, engine)[0]
+    certainly satisfied, else UNDECIDED."""
+    return _test_and_counts(as_boxes(boxes), scan, q, inner)[0]
 
 
 def _checked_q(q) -> None:
@@ -143,7 +141,6 @@ def _pave(
     scale,
     inner,
     splits_per_level,
-    engine,
     ray_test,
     max_boxes,
     max_kept=None,
@@ -189,13 +186,11 @@ def _pave(
     def recount(b, reject):
         from intervals.sonar import rays  # its kernels compile only for runs with the ray test
 
-        return rays.joint_rejection_counts(
-            b, local, rays.DEFAULT_PIECES, other=reject, engine=engine
-        )
+        return rays.joint_rejection_counts(b, local, rays.DEFAULT_PIECES, other=reject)
 
     def sonar_test(b):
         tested[0] += b.shape[0]
-        verdicts, rejects, reject = _test_and_counts(b, local, q, inner, engine)
+        verdicts, rejects, reject = _test_and_counts(b, local, q, inner)
         keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
@@ -232,7 +227,7 @@ def _pave(
     if not (paving.coarse or over):
         rejects = np.concatenate(counts) if counts else np.zeros(0, dtype=np.int64)
         if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
-            reject = sensor_verdicts(paving.boundary, local, False, engine)[0]
+            reject = sensor_verdicts(paving.boundary, local, False)[0]
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
@@ -241,13 +236,13 @@ def _pave(
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
             rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
         if contract and n and rounds:
-            paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
+            paving, rejects = _shaved(paving, rejects, local, q, rounds, max_boxes)
         return paving, rejects, False
 
     def retest(b):  # (kept boxes, their counts): the boxes the test does not reject
         kept, kept_counts = [b[:0]], [np.zeros(0, dtype=np.int64)]
         for chunk in np.array_split(b, max(1, -(-b.shape[0] // (max_boxes or DEFAULT_MAX_BOXES)))):
-            verdicts, rejects, reject = _test_and_counts(chunk, local, q, False, engine)
+            verdicts, rejects, reject = _test_and_counts(chunk, local, q, False)
             if ray_test:
                 rejects = recount(chunk, reject)
             keep = (verdicts != OUTSIDE) & (rejects <= q)
@@ -279,7 +274,7 @@ def _pave(
     return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
 
 
-def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
+def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, rounds, max_boxes):
     """The boundary boxes narrowed by :func:`intervals.sonar.contractor.shave` (cone and room
     tests at ``q``, ``rounds`` rounds, at most ``max_boxes`` slices a call), with their counts: a
     box's count, the sensors rejecting it, holds for its parts (each rejects every pose of the
@@ -287,7 +282,7 @@ def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, r
     boxes = paving.boundary
 
     def rejected(slices):
-        return _test_and_counts(slices, local, q, False, engine)[0] == OUTSIDE
+        return _test_and_counts(slices, local, q, False)[0] == OUTSIDE
 
     shaved, rows = contractor.shave(boxes, rejected, local, q, rounds, max_per_call=max_boxes)
     return Subpaving(paving.inner, shaved, coarse=paving.coarse), rejects[rows]
@@ -301,7 +296,6 @@ def localize(
     heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
     inner: bool = False,
     splits_per_level: int = 3,
-    engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
     max_kept: int | None = None,
@@ -315,7 +309,6 @@ def localize(
     are bisected further before the test (see :func:`intervals.sivia.sivia`).
     ``inner=False`` (default) skips the inner acceptance
     test: the outer approximation is what the fusion uses, and it is cheaper.
-    ``engine``: the implementation of the box test (see :func:`intervals.sonar.cone.sensor_verdicts`).
     ``ray_test``: add :mod:`intervals.sonar.rays` to the test of the boxes kept (``None``: when the
     cones are thin, :data:`RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`).
     ``max_boxes``: a budget (None: none). The set then holds at most ``max_boxes`` boxes and
@@ -345,7 +338,6 @@ def localize(
         scale,
         inner,
         splits_per_level,
-        engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
         max_kept,
@@ -384,7 +376,6 @@ def gomne(
     heading_scale_m_per_rad: float = DEFAULT_HEADING_SCALE_M_PER_RAD,
     inner: bool = False,
     guaranteed: bool = True,
-    engine: str = "compiled",
     ray_test: bool | None = None,
     max_boxes: int | None = None,
     max_kept: int | None = None,
@@ -404,7 +395,7 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``
+    ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``
     and ``shave_rounds``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
     2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
     component): SIVIA rejects the boxes meeting none of them without testing them, so the
@@ -426,7 +417,6 @@ def gomne(
         scale,
         inner,
         splits_per_level,
-        engine,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
         max_kept,
@@ -445,7 +435,6 @@ def gomne(
                 q,
                 heading_scale_m_per_rad,
                 inner,
-                engine=engine,
                 ray_test=ray_test,
                 max_boxes=max_boxes,
                 max_kept=max_kept,

@@ -61,7 +61,6 @@ from intervals.localize import (
     gomne,
 )
 from intervals.sivia import OUTSIDE
-from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarScan
 from validated_records import bounded, validate_fields
 
@@ -129,9 +128,6 @@ class TrackerSettings:
     ``q_max`` outliers (true), or GOMNE's smaller set at its minimal ``q``, which can miss it
     (false; see :func:`intervals.localize.gomne`). The guaranteed set is much larger where few
     sensors see a wall, and a kidnapping is then detected later."""
-    engine: Engine = Engine.COMPILED
-    """The implementation of the sonar box test (the compiled kernel by default; ``numpy`` is
-    its reference, same sets)."""
     ray_test: bool | None = None
     """Add the ray test of :mod:`intervals.sonar.rays` to the box test (``None``: only for thin cones,
     see :data:`intervals.localize.RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD`)."""
@@ -332,7 +328,6 @@ class IntervalTracker:
             s.q_max,
             s.heading_scale_m_per_rad,
             guaranteed=s.guaranteed,
-            engine=s.engine,
             ray_test=s.ray_test,
             max_boxes=s.max_boxes,
             contract=s.contractor,
@@ -402,7 +397,7 @@ class IntervalTracker:
             merged = wrap_headings(merged)
             # the merged cells tested once: those the sonar or the room reject hold no pose
             # of the set (box_test, at the set's relaxation), the rest is the report
-            held = box_test(merged, scan.restricted_to(merged), found.q_set, False, s.engine)
+            held = box_test(merged, scan.restricted_to(merged), found.q_set, False)
             if (held != OUTSIDE).any():
                 merged = merged[held != OUTSIDE]
             inner, boundary, coarse = np.zeros((0, 3, 2)), merged, True

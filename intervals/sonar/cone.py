@@ -38,23 +38,22 @@ The in-room test is in :mod:`intervals.sonar.room`, the q-relaxation that combin
 verdicts in :mod:`intervals.localize`; floating point (why every comparison keeps feasible
 boxes) in :mod:`intervals.sonar.geometry`.
 
-Two implementations (:class:`intervals.sonar.engines.Engine`). The sensor tests (and the in-room
-test) run by default in the compiled kernels of :mod:`intervals.sonar.cone_kernel` (numba; one call
-per SIVIA level, scalar loops over boxes, segments and sensors). The vectorised numpy code in this
-module is their reference. The kernels evaluate the same formulas in the same order of float64
-operations (compiled without ``fastmath``: no fused multiply-adds, no reassociation), with the same
-constants and biases, on the same outward-rounded reading intervals, mount constants and
-``cos``/``sin`` of the heading bounds (computed here by numpy and passed in), so their verdicts are
-the reference's bit for bit and everything above and in :mod:`intervals.sonar.geometry` holds for
-both (the tests compare 36,000 random boxes, about 1.7 million per-sensor verdicts and 108,000 box
-verdicts: none differs). Had the kernel taken ``cos``/``sin`` from libm instead, the ulp or two by
-which they may differ from numpy's would still lie inside the ``1e-15`` per component allowed in
-:mod:`intervals.sonar.geometry`.
+The sensor tests (and the in-room test) run in the compiled kernels of
+:mod:`intervals.sonar.cone_kernel` (numba; one call per SIVIA level, scalar loops over boxes,
+segments and sensors). Their reference, which the tests compare them with, is the vectorised
+numpy code of :mod:`intervals.sonar.reference.cone` and :mod:`intervals.sonar.reference.room`,
+outside the production path. The kernels evaluate the same formulas in the same order of
+float64 operations (compiled without ``fastmath``: no fused multiply-adds, no reassociation),
+with the same constants and biases, on the same outward-rounded reading intervals, mount
+constants and ``cos``/``sin`` of the heading bounds (computed by numpy, :func:`heading_trig`,
+and passed in), so their verdicts are the reference's bit for bit and everything above and in
+:mod:`intervals.sonar.geometry` holds for both (the tests compare 36,000 random boxes, about
+1.7 million per-sensor verdicts and 108,000 box verdicts: none differs). Had the kernel taken
+``cos``/``sin`` from libm instead, the ulp or two by which they may differ from numpy's would
+still lie inside the ``1e-15`` per component allowed in :mod:`intervals.sonar.geometry`.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -62,134 +61,29 @@ from intervals import interval as ia
 from intervals.boxes import as_boxes
 from intervals.errors import IntervalError
 from intervals.sonar import cone_kernel
-from intervals.sonar.engines import Engine
-from intervals.sonar.geometry import (
-    ANGLE_MARGIN_RAD,
-    ARC_SLACK,
-    GUARD_M,
-    NEAR_SWITCH_M,
-    arc_reaches,
-    clip_segment,
-    nearest_on_segment,
-    point_box_farthest,
-    segment_box_gap,
-    wedge_constraints,
-)
-from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
-
-NUMPY_BLOCK_ELEMENTS = 1 << 18
-"""Largest number of (box, segment, sensor) triples the numpy reference evaluates at once."""
-
-
-@dataclass(frozen=True)
-class _SensorBoxes:
-    """Per box and sensor ``(N, k)``: the sensor-position box (centre ``cx, cy``, half-widths
-    ``hx, hy``), the two half-planes ``(nx, ny, c)`` holding ``S + W(Phi)`` (``union``; ``c =
-    -inf`` where ``width(Phi) >= pi``) and the two holding the intersection of the wedges
-    ``s + W(Psi)`` over ``s in S`` (``inter``), and ``sure``: ``Psi`` is not empty."""
-
-    cx: np.ndarray
-    cy: np.ndarray
-    hx: np.ndarray
-    hy: np.ndarray
-    union: tuple
-    inter: tuple
-    sure: np.ndarray
+from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M, NEAR_SWITCH_M
+from intervals.sonar.scan import SonarScan
 
 
 def heading_trig(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(cos, sin)`` ``(N, 2)`` of the heading bounds of boxes ``(N, 3, 2)``: the one source of
-    these values for both engines (so they see the same directions)."""
+    these values for the kernels and the numpy reference (so they see the same directions)."""
     theta = boxes[:, 2]
     return np.cos(theta), np.sin(theta)
 
 
-def sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
-    theta_lo, theta_hi = boxes[:, 2, 0], boxes[:, 2, 1]  # (N,)
-    width = theta_hi - theta_lo
-    limit = ia.TRIG_EXACT_LIMIT_RAD
-    trusted = (np.abs(theta_lo) < limit) & (np.abs(theta_hi) < limit)
-    full = ~trusted | (width >= 2.0 * np.pi - ANGLE_MARGIN_RAD)
-    # angle addition: direction of theta + c for every box bound and sensor constant c
-    cos_theta, sin_theta = heading_trig(boxes)
-    cos_lo, sin_lo = cos_theta[:, 0:1], sin_theta[:, 0:1]  # (N, 1)
-    cos_hi, sin_hi = cos_theta[:, 1:2], sin_theta[:, 1:2]
-    cb, sb = belt.mount_trig
-
-    def turned(c, s):  # ((N, k) x4): unit vectors at theta_lo + c and theta_hi + c
-        return (
-            cos_lo * c - sin_lo * s,
-            sin_lo * c + cos_lo * s,
-            cos_hi * c - sin_hi * s,
-            sin_hi * c + cos_hi * s,
-        )
-
-    # sensor positions: x + r cos(theta + beta) over the arc [theta_lo, theta_hi] + beta
-    ax, ay, bx, by = turned(cb, sb)
-    half_turn = (width >= np.pi)[:, None]
-    whole = full[:, None]
-    reach = {
-        axis: whole | arc_reaches(ax, ay, bx, by, *axis, half_turn)
-        for axis in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
-    }
-    cos_min = np.where(reach[(-1.0, 0.0)], -1.0, np.minimum(ax, bx))
-    cos_max = np.where(reach[(1.0, 0.0)], 1.0, np.maximum(ax, bx))
-    sin_min = np.where(reach[(0.0, -1.0)], -1.0, np.minimum(ay, by))
-    sin_max = np.where(reach[(0.0, 1.0)], 1.0, np.maximum(ay, by))
-    r_lo, r_hi = belt.mount_radius_bounds
-    margin = belt.sensor_box_margin_m
-    x_lo = boxes[:, None, 0, 0] + np.minimum(r_lo * cos_min, r_hi * cos_min) - margin
-    x_hi = boxes[:, None, 0, 1] + np.maximum(r_lo * cos_max, r_hi * cos_max) + margin
-    y_lo = boxes[:, None, 1, 0] + np.minimum(r_lo * sin_min, r_hi * sin_min) - margin
-    y_hi = boxes[:, None, 1, 1] + np.maximum(r_lo * sin_max, r_hi * sin_max) + margin
-    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
-    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
-    # wedge edges: union over the box at theta_lo + alpha - gamma and theta_hi + alpha + gamma,
-    # intersection at theta_hi + alpha - gamma and theta_lo + alpha + gamma
-    (c_right, s_right), (c_left, s_left) = belt.cone_trig
-    right_lo_x, right_lo_y, right_hi_x, right_hi_y = turned(c_right, s_right)
-    left_lo_x, left_lo_y, left_hi_x, left_hi_y = turned(c_left, s_left)
-    narrow = trusted & (width + 2.0 * belt.half_aperture_rad < np.pi - ANGLE_MARGIN_RAD)
-    narrow = narrow[:, None]
-    union = wedge_constraints(
-        (right_lo_x, right_lo_y), (left_hi_x, left_hi_y), cx, cy, hx, hy, -1.0
-    )
-    union = tuple((nx, ny, np.where(narrow, c, -np.inf)) for nx, ny, c in union)
-    inter = wedge_constraints((right_hi_x, right_hi_y), (left_lo_x, left_lo_y), cx, cy, hx, hy, 1.0)
-    sure = trusted & (width < 2.0 * belt.half_aperture_rad - ANGLE_MARGIN_RAD)
-    sure = np.broadcast_to(sure[:, None], cx.shape)
-    return _SensorBoxes(cx, cy, hx, hy, union, tuple(inter), sure)
-
-
-def sensor_verdicts(
-    boxes, scan: SonarScan, inner: bool = True, engine: str = "compiled"
-) -> tuple[np.ndarray, np.ndarray]:
+def sensor_verdicts(boxes, scan: SonarScan, inner: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per box and sensor: ``(reject (N, k), certain (N, k))`` bool arrays.
 
     ``reject``: the sensor's reading is inconsistent with every pose of the box (hit test fails
     or free-space test fires). ``certain``: the reading is consistent with every pose of the box
     (only computed when ``inner``; else all False). Ignored sensors never reject and are always
-    certain (when ``inner``). See the module doc for the tests and their soundness.
-    ``engine``: an :class:`~intervals.sonar.engines.Engine`; ``"compiled"`` runs :mod:`intervals.sonar.cone_kernel` (one
-    call for all boxes), ``"numpy"`` the vectorised reference below (same results).
+    certain (when ``inner``). See the module doc for the tests and their soundness. One call
+    of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into` for all boxes.
     """
     boxes = as_boxes(boxes)
     if boxes.shape[1] != 3:
         raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
-    if (
-        engine == Engine.NUMPY
-    ):  # in blocks of boxes: its arrays grow with boxes x segments x sensors
-        block = max(1, NUMPY_BLOCK_ELEMENTS // max(1, scan.segments.shape[0] * scan.belt.count))
-        parts = [
-            _numpy_sensor_verdicts(boxes[start : start + block], scan, inner)
-            for start in range(0, max(boxes.shape[0], 1), block)
-        ]
-        reject = np.concatenate([part[0] for part in parts])
-        return reject, np.concatenate([part[1] for part in parts])
-    if engine != Engine.COMPILED:
-        raise IntervalError(
-            f"sonar test: engine must be one of {', '.join(Engine)}, got {engine!r}"
-        )
     n, k = boxes.shape[0], scan.belt.count
     reject, certain = np.empty((n, k), dtype=bool), np.empty((n, k), dtype=bool)
     belt, boxes = scan.belt, np.ascontiguousarray(boxes)  # one compiled signature: C order
@@ -220,96 +114,4 @@ def sensor_verdicts(
         reject,
         certain,
     )
-    return reject, certain
-
-
-def _numpy_sensor_verdicts(boxes: np.ndarray, scan: SonarScan, inner: bool):
-    """The numpy reference of :func:`sensor_verdicts`: every (box, visible segment, sensor)
-    triple as gathered arrays."""
-    n, k = boxes.shape[0], scan.belt.count
-    lo_d, hi_d = scan.ranges[:, 0], scan.ranges[:, 1]
-    echo, free = scan.kind == ECHO, scan.kind == FREE
-    sb = sensor_boxes(boxes, scan.belt)
-
-    # visible segments: pairs (box, segment) within reach of the hull of the sensor boxes
-    seg = scan.segments
-    sx_lo, sx_hi = (sb.cx - sb.hx).min(axis=1), (sb.cx + sb.hx).max(axis=1)
-    sy_lo, sy_hi = (sb.cy - sb.hy).min(axis=1), (sb.cy + sb.hy).max(axis=1)
-    gap = segment_box_gap(
-        seg[:, 0, 0],
-        seg[:, 0, 1],
-        seg[:, 1, 0] - seg[:, 0, 0],
-        seg[:, 1, 1] - seg[:, 0, 1],
-        ((sx_lo + sx_hi) / 2)[:, None],
-        ((sy_lo + sy_hi) / 2)[:, None],
-        ((sx_hi - sx_lo) / 2)[:, None],
-        ((sy_hi - sy_lo) / 2)[:, None],
-    )
-    box_idx, seg_idx = np.nonzero(gap <= scan.reach_m + GUARD_M)  # (P,) visible pairs
-    ax, ay = seg[seg_idx, 0, 0][:, None], seg[seg_idx, 0, 1][:, None]  # (P, 1)
-    ex, ey = seg[seg_idx, 1, 0][:, None] - ax, seg[seg_idx, 1, 1][:, None] - ay
-
-    # stage 1, every (pair, sensor): the part [t0, t1] of the segment in S + W(Phi)
-    union = tuple(tuple(v[box_idx] for v in h) for h in sb.union)
-    t0, t1 = clip_segment(ax, ay, ex, ey, union, 0.0, 1.0)
-    # stage 2, only the (pair, sensor) triples whose segment part is not empty and whose
-    # sensor is used: nothing else can satisfy the hit test or fire the free-space test
-    pair, sensor = np.nonzero((t0 <= t1) & (scan.kind != IGNORED))  # (T,)
-    t0, t1 = t0[pair, sensor], t1[pair, sensor]
-    box, j = box_idx[pair], seg_idx[pair]
-    ax, ay = seg[j, 0, 0], seg[j, 0, 1]
-    ex, ey = seg[j, 1, 0] - ax, seg[j, 1, 1] - ay
-    cx, cy, hx, hy = sb.cx[box, sensor], sb.cy[box, sensor], sb.hx[box, sensor], sb.hy[box, sensor]
-    lo_t, hi_t = lo_d[sensor], hi_d[sensor]
-
-    # hit test: distance bounds between that part and the sensor box
-    p0x, p0y = ax + t0 * ex, ay + t0 * ey
-    dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-    dist_lb = segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy) - GUARD_M
-    dist_ub = (
-        np.maximum(
-            point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-            point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
-        )
-        + GUARD_M
-    )
-    hit_ok = (dist_lb <= hi_t) & (dist_ub >= lo_t)
-
-    # free-space test: segment points inside the cone for every pose of the box (the
-    # intersection of the wedges lies in their union, so these triples suffice); only where
-    # Psi is not empty, elsewhere it cannot fire
-    sure = sb.sure[box, sensor]
-    far_bound = np.zeros(t0.shape)
-    fs = np.flatnonzero(sure)
-    if fs.size:
-        b_fs, s_fs = box[fs], sensor[fs]
-        inter = tuple(tuple(v[b_fs, s_fs] for v in h) for h in sb.inter)
-        fax, fay, fex, fey = ax[fs], ay[fs], ex[fs], ey[fs]
-        u0, u1 = clip_segment(fax, fay, fex, fey, inter, 0.0, 1.0)
-        part = u0 <= u1
-        sure[fs] = part
-        u0, u1 = np.where(part, u0, 0.0), np.where(part, u1, 0.0)
-        far_bound[fs] = (
-            nearest_on_segment(
-                cx[fs], cy[fs], fax + u0 * fex, fay + u0 * fey, (u1 - u0) * fex, (u1 - u0) * fey
-            )[2]
-            + np.hypot(hx[fs], hy[fs])
-            + GUARD_M
-        )  # >= |P - s| for every s of the sensor box
-    free_fires = sure & (far_bound < lo_t)
-
-    idx = box * k + sensor
-
-    def any_pair(flags):
-        return np.bincount(idx, weights=flags, minlength=n * k).reshape(n, k) > 0
-
-    impossible = echo & (lo_d > hi_d)
-    reject = (echo & (~any_pair(hit_ok) | impossible)) | ((echo | free) & any_pair(free_fires))
-    certain = np.zeros((n, k), dtype=bool)
-    if inner:
-        too_close = np.where(free[sensor], dist_lb <= lo_t, dist_lb < lo_t)
-        all_far = ~any_pair(too_close)
-        sure_hit = any_pair(sure & (far_bound <= hi_t))
-        certain = (echo & all_far & sure_hit & ~impossible) | (free & all_far)
-        certain |= scan.kind == IGNORED
     return reject, certain

@@ -1,10 +1,11 @@
-r"""Tolerances and vectorised geometric primitives of the sonar box tests (numpy).
+r"""Tolerances of the sonar box tests and the numpy distance primitives of the scan.
 
-Everything here works on component arrays (x and y separately, broadcast shapes); boxes are
+The primitives work on component arrays (x and y separately, broadcast shapes); boxes are
 given by centre ``(cx, cy)`` and half-widths ``(hx, hy)``: a box ``[lo, hi]`` is enclosed by
 ``[c - h, c + h]`` up to one rounding of ``(lo + hi)/2`` and ``(hi - lo)/2``, far below
 :data:`GUARD_M`. The compiled kernels (:mod:`intervals.sonar.cone_kernel`) repeat these
-formulas operation for operation; these are their references.
+formulas operation for operation; the other primitives of the numpy reference test are in
+:mod:`intervals.sonar.reference.geometry`. The argument below covers both.
 
 Floating point. The reading intervals are outward rounded with :mod:`intervals.interval`. ``S`` is
 a sensor-position box of :mod:`intervals.sonar.cone`. Directions ``theta + c`` (``c`` = ``beta_i``,
@@ -47,7 +48,7 @@ SENSOR_BOX_MARGIN = 1e-9
 """Relative widening of the sensor-position boxes (see :meth:`intervals.sonar.scan.SonarBelt.sensor_box_margin_m`)."""
 
 ARC_SLACK = 1e-12
-"""Slack of the arc-extremum decisions in :func:`arc_reaches`, towards "reached"."""
+"""Slack of the arc-extremum decisions (``arc_reaches``), towards "reached"."""
 
 ANGLE_MARGIN_RAD = 1e-9
 """Margin of the heading-width decisions (``Psi`` not empty, ``width(Phi) < pi``, a full turn),
@@ -89,49 +90,3 @@ def segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy):
     safe = np.where(far, dist, 1.0)
     spread = np.abs(qx - cx) / safe * hx + np.abs(qy - cy) / safe * hy
     return dist - np.where(far, spread, np.hypot(hx, hy))
-
-
-def point_box_farthest(px, py, cx, cy, hx, hy):
-    """Largest distance from points to the points of boxes ``(c, h)``."""
-    return np.hypot(np.abs(px - cx) + hx, np.abs(py - cy) + hy)
-
-
-def clip_segment(ax, ay, ex, ey, constraints, t_lo, t_hi):
-    """Parameter range of ``a + t e`` (t in ``[t_lo, t_hi]``) satisfying ``nx qx + ny qy >= c``
-    for each ``(nx, ny, c)`` of ``constraints``; empty where the returned ``lo > hi``."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for nx, ny, c in constraints:
-            g0 = nx * ax + ny * ay - c
-            ge = nx * ex + ny * ey
-            bound = -g0 / ge
-            t_lo = np.where(ge > 0, np.maximum(t_lo, bound), t_lo)
-            t_hi = np.where(ge < 0, np.minimum(t_hi, bound), t_hi)
-            t_hi = np.where((ge == 0) & ~(g0 >= 0), -np.inf, t_hi)
-    return t_lo, t_hi
-
-
-def wedge_constraints(u_lo, u_hi, cx, cy, hx, hy, sign):
-    """Half-planes bounding wedges of directions from ``u_lo`` to ``u_hi`` (unit vectors
-    ``(ux, uy)``, counter-clockwise, less than pi apart) with apexes in the boxes ``(c, h)``:
-    ``det(u_lo, q) >= k_1`` and ``det(q, u_hi) >= k_2`` where ``k`` is the minimum over the box
-    minus ``GUARD_M`` (``sign = -1``: union of the wedges, a superset) or the maximum plus
-    ``GUARD_M`` (``sign = +1``: intersection of the wedges, a subset)."""
-    out = []
-    for (ux, uy), flip in ((u_lo, 1.0), (u_hi, -1.0)):
-        nx, ny = -flip * uy, flip * ux
-        spread = np.abs(nx) * hx + np.abs(ny) * hy
-        out.append((nx, ny, nx * cx + ny * cy + sign * (spread + GUARD_M)))
-    return out
-
-
-def arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn):
-    """Whether the arc of directions swept counter-clockwise from ``u_a`` to ``u_b`` (unit
-    vectors) holds the direction ``e`` (a unit axis vector ``(ex, ey)``). ``half_turn``: the arc
-    is at least pi wide (then it misses ``e`` only when ``e`` is strictly inside the
-    complementary arc from ``u_b`` to ``u_a``). Decided with a slack of ``ARC_SLACK`` towards
-    "reached": a wrong "not reached" can only happen within ``1e-12`` rad of an end of the arc,
-    where the extreme value differs from the end's by less than ``1e-24``."""
-    det_a = ux_a * ey - uy_a * ex  # det(u_a, e)
-    det_b = ex * uy_b - ey * ux_b  # det(e, u_b)
-    narrow = (det_a >= -ARC_SLACK) & (det_b >= -ARC_SLACK)
-    return np.where(half_turn, ~((det_a < -ARC_SLACK) & (det_b < -ARC_SLACK)), narrow)

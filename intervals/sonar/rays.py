@@ -34,7 +34,7 @@ radial mounts of the default belt ``kappa = delta``, so the ``kappa`` terms vani
 Enclosures over a box (or a piece of one, below):
 
 * ``h`` and ``(w . e) / L``: ``x`` and ``y`` occur once each: exact up to rounding.
-* ``sin B``, ``1 / sin B``, ``cot B`` (:func:`sine_terms`): from ``sin`` and ``cos`` at the two
+* ``sin B``, ``1 / sin B``, ``cot B`` (``sine_terms``): from ``sin`` and ``cos`` at the two
   float ends of the ``B`` interval. If both sines have one strict sign and the interval is
   narrower than ``MAX_B_WIDTH_RAD = 3 < pi``, ``sin`` has no zero inside (zeros are ``pi``
   apart, so one zero inside would flip the sign); likewise, if both cosines have one strict
@@ -46,7 +46,7 @@ Enclosures over a box (or a piece of one, below):
   on one coordinate, ``w . e`` on the other, ``cot B`` occurs once). For a slanted segment
   ``h cot B - (w . e) / L`` is affine in ``cot B`` for fixed ``(x, y)`` and affine in ``(x,
   y)`` (each once) for fixed ``cot B``, so its exact range is the hull of those at the two
-  ends of the ``cot`` range (:func:`_affine_range`).
+  ends of the ``cot`` range (``affine_range``).
 * Contraction (hit test only): by (3), the poses whose ``lambda`` lies in the reading's
   ``[lo, hi]`` have ``h`` in ``sin B ([lo, hi] + rho cos kappa + rho sin kappa cot B)``;
   (2) is re-evaluated with ``h`` narrowed to that and intersected with the first enclosure
@@ -85,9 +85,11 @@ A box is rejected by sensor ``i`` (:func:`ray_rejections`) when every piece is; 
 (:func:`joint_rejections`) when in every piece more than ``q`` sensors reject the piece (a
 pose of the box lies in some piece, where more than ``q`` readings cannot be explained).
 
-Engines (:class:`intervals.sonar.engines.Engine`): the numpy reference evaluates all of the above on arrays of
-(piece, sensor, segment) triples; the compiled kernel (numba) performs the same operations in
-the same order, triple by triple, and stops early: a sensor's piece is decided once one
+Implementation: the compiled kernel (numba) evaluates all of the above triple by triple; its
+reference, :mod:`intervals.sonar.reference.rays` (outside the production path, tested against
+it), does on arrays of (piece, sensor, segment) triples, with the names used above
+(``sine_terms``, ``affine_range``, ``ray_meeting``). The kernel performs the same operations in
+the same order and stops early: a sensor's piece is decided once one
 segment passes the hit test and one surely meets a free-space ray, and it skips the
 evaluation of a segment whose verdict is already known from the off-line and far-segment
 bounds (``min |h| - rho >= lo`` also rules out a free-space meeting nearer than ``lo``;
@@ -98,7 +100,7 @@ reading bounds. The constants (``e``, ``L``, ``epsilon = atan2(e)``, ``rho``, ``
 ``kappa`` terms, ``epsilon - alpha - delta``), ``B`` and ``h``, ``(w . e) / L`` are intervals
 from :mod:`intervals.interval` (outward rounding; libm sin, cos, atan2 widened by four times
 their documented error; angles enclosed modulo ``2 pi``, which sin, cos and cot ignore). The
-per-triple arithmetic (``_mul``, ``_add``, ``_sub``, quotients, box gaps) rounds each bound
+per-triple arithmetic (``_k_mul``, ``_k_add``, ``_k_sub``, quotients, box gaps) rounds each bound
 one ulp outward with ``nextafter``, which encloses the exact result of a correctly rounded
 IEEE operation. ``sin``/``cos`` at the ends of ``B`` (numpy's or numba's, whose documented or
 measured errors are a few ulps) are enclosed by ``+- TRIG_TOL = 2e-15``: at least 9 ulps of
@@ -121,9 +123,8 @@ import numpy as np
 from intervals import interval as ia
 from intervals.boxes import as_boxes
 from intervals.errors import IntervalError
-from intervals.sonar.engines import Engine
 from intervals.sonar.geometry import GUARD_M
-from intervals.sonar.scan import ECHO, FREE, SonarScan
+from intervals.sonar.scan import ECHO, SonarScan
 
 DEFAULT_PIECES = (1, 1, 4)
 """Pieces ``(px, py, pt)`` along x, y and theta into which each box is cut (see the module
@@ -148,89 +149,12 @@ MAX_B_WIDTH_RAD = 3.0
 """Widest ``B`` interval on which ``sin B`` is claimed to keep one sign (below pi)."""
 
 BLOCK_ELEMENTS = 1 << 18
-"""Largest number of (piece, sensor, segment) triples evaluated in one numpy pass, and of
-(piece, segment) pairs whose terms the compiled engine is given at once."""
-
-
-def _down(x):
-    return np.nextafter(x, -np.inf)
-
-
-def _up(x):
-    return np.nextafter(x, np.inf)
-
-
-def _mul(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
-    """``[a] * [b]`` rounded outward, finite bounds (component arrays, broadcast)."""
-    p = (a_lo * b_lo, a_lo * b_hi, a_hi * b_lo, a_hi * b_hi)
-    return (
-        _down(np.minimum(np.minimum(p[0], p[1]), np.minimum(p[2], p[3]))),
-        _up(np.maximum(np.maximum(p[0], p[1]), np.maximum(p[2], p[3]))),
-    )
-
-
-def _add(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
-    """``[a] + [b]`` rounded outward."""
-    return _down(a_lo + b_lo), _up(a_hi + b_hi)
-
-
-def _sub(a_lo, a_hi, b_lo, b_hi) -> tuple[np.ndarray, np.ndarray]:
-    """``[a] - [b]`` rounded outward."""
-    return _down(a_lo - b_hi), _up(a_hi - b_lo)
+"""Largest number of (piece, segment) pairs whose terms the kernel is given at once, and of
+(piece, sensor, segment) triples in one pass of the numpy reference."""
 
 
 def _point(values) -> np.ndarray:
     return ia.interval(np.asarray(values, dtype=np.float64))
-
-
-def _positive_quotient_bounds(c_lo, c_hi, s_lo, s_hi) -> tuple[np.ndarray, np.ndarray]:
-    """``(lower, upper)`` of ``[c] / [s]`` for ``0 < s_lo <= s_hi`` (rounded outward)."""
-    return (
-        _down(c_lo / np.where(c_lo >= 0.0, s_hi, s_lo)),
-        _up(c_hi / np.where(c_hi >= 0.0, s_lo, s_hi)),
-    )
-
-
-def sine_terms(
-    b_lo, b_hi
-) -> tuple[
-    np.ndarray,
-    tuple[np.ndarray, np.ndarray],
-    tuple[np.ndarray, np.ndarray],
-    tuple[np.ndarray, np.ndarray],
-    np.ndarray,
-]:
-    """Over the intervals ``[b_lo, b_hi]`` (component arrays): ``one_sign`` (``sin`` keeps a
-    strict sign), the intervals ``(lo, hi)`` of ``1 / sin``, of ``cot`` and of ``sin`` (set to
-    0 where not ``one_sign``), and an upper bound of ``|sin|`` (everywhere). See the module
-    doc."""
-    cl, sl, ch, sh = np.cos(b_lo), np.sin(b_lo), np.cos(b_hi), np.sin(b_hi)
-    narrow = b_hi - b_lo < MAX_B_WIDTH_RAD
-    pos = narrow & (sl > TRIG_TOL) & (sh > TRIG_TOL)
-    neg = narrow & (sl < -TRIG_TOL) & (sh < -TRIG_TOL)
-    one_sign = pos | neg
-    sign = np.where(neg, -1.0, 1.0)  # work with |sin| = sign sin and sign cos (exact)
-    al, ah, gl, gh = sign * sl, sign * sh, sign * cl, sign * ch
-    monotone = ((cl > TRIG_TOL) & (ch > TRIG_TOL)) | ((cl < -TRIG_TOL) & (ch < -TRIG_TOL))
-    small = np.where(one_sign, np.minimum(al, ah) - TRIG_TOL, 1.0)
-    big = np.where(monotone & narrow, np.maximum(np.abs(sl), np.abs(sh)) + TRIG_TOL, 1.0)
-    inv_lo, inv_hi = _down(1.0 / big), _up(1.0 / small)  # 1 / |sin|
-    inv = (np.where(pos, inv_lo, -inv_hi), np.where(pos, inv_hi, -inv_lo))
-    # cot = (sign cos) / |sin|, decreasing: [cot(b_hi), cot(b_lo)]
-    at_hi = _positive_quotient_bounds(
-        gh - TRIG_TOL, gh + TRIG_TOL, np.where(one_sign, ah - TRIG_TOL, 1.0), ah + TRIG_TOL
-    )
-    at_lo = _positive_quotient_bounds(
-        gl - TRIG_TOL, gl + TRIG_TOL, np.where(one_sign, al - TRIG_TOL, 1.0), al + TRIG_TOL
-    )
-    zero = np.zeros_like(b_lo)
-    inv = (np.where(one_sign, inv[0], 0.0), np.where(one_sign, inv[1], 0.0))
-    cot = (np.where(one_sign, at_hi[0], zero), np.where(one_sign, at_lo[1], zero))
-    sin = (
-        np.where(pos, small, np.where(neg, -big, 0.0)),
-        np.where(pos, big, np.where(neg, -small, 0.0)),
-    )
-    return one_sign, inv, cot, sin, big
 
 
 def _segment_terms(segments: np.ndarray) -> dict[str, np.ndarray]:
@@ -248,75 +172,12 @@ def _segment_terms(segments: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _pose_terms(x, y, seg):
+def pose_terms(x, y, seg):
     """``(g / L, (w . e) / L)`` intervals ``(P, 1, m, 2)`` for ``x, y (P, 1, 1, 2)``:
     ``g = det(a, e) - x e_y + y e_x``, ``w . e = a . e - x e_x - y e_y``, x and y once each."""
     g = ia.add(ia.sub(seg["det_ae"], ia.mul(x, seg["ey"])), ia.mul(y, seg["ex"]))
     we = ia.sub(ia.sub(seg["dot_ae"], ia.mul(x, seg["ex"])), ia.mul(y, seg["ey"]))
     return ia.div(g, seg["L"]), ia.div(we, seg["L"])
-
-
-def _affine_range(c_lo, c_hi, x, y, seg):
-    """``(lo, hi)`` of ``(c g - w . e) / L`` over ``c in [c_lo, c_hi]`` and the box ``x, y``:
-    the hull of its exact ranges at ``c = c_lo`` and ``c = c_hi``, where it is affine in ``x``
-    and ``y`` (each once): ``c det(a, e) - a . e + x (e_x - c e_y) + y (e_y + c e_x)``."""
-
-    def at(c):
-        ex, ey, det_ae, dot_ae = (seg[key] for key in ("ex", "ey", "det_ae", "dot_ae"))
-        coef_x = _sub(ex[..., 0], ex[..., 1], *_mul(c, c, ey[..., 0], ey[..., 1]))
-        coef_y = _add(ey[..., 0], ey[..., 1], *_mul(c, c, ex[..., 0], ex[..., 1]))
-        const = _sub(*_mul(c, c, det_ae[..., 0], det_ae[..., 1]), dot_ae[..., 0], dot_ae[..., 1])
-        value = _add(*const, *_mul(x[..., 0], x[..., 1], *coef_x))
-        value = _add(*value, *_mul(y[..., 0], y[..., 1], *coef_y))
-        return _positive_quotient_bounds(*value, seg["L"][..., 0], seg["L"][..., 1])
-
-    low, high = at(c_lo), at(c_hi)
-    return np.minimum(low[0], high[0]), np.maximum(low[1], high[1])
-
-
-def _ray_meeting(b, kappa_terms, pose_terms, x, y, seg, slanted, reading=None):
-    """Enclosures ``(lo, hi)`` of ``lambda`` (eq. 1) and ``t L`` (eq. 2), component arrays
-    ``(P, k, m)``, ``one_sign`` (where False, both are ``[-inf, inf]``) and an upper bound of
-    ``|sin B|``.
-
-    ``b``: the ``B`` intervals ``(P, k, m, 2)``; ``kappa_terms``: ``rho cos kappa``,
-    ``rho sin kappa`` intervals ``(1, k, 1, 2)``; ``pose_terms``: :func:`_pose_terms`;
-    ``x, y``: the boxes' intervals ``(P, 1, 1, 2)``; ``seg``: :func:`_segment_terms`;
-    ``slanted``: indices of the segments parallel to neither axis. ``reading``: ``(lo, hi)``
-    ``(1, k, 1)``: when given, ``t L`` is only enclosed over the poses whose ``lambda`` lies in
-    it (eq. 3; empty, ``lo > hi``, where there is none).
-    """
-    (rc, rs), (g_l, we_l) = kappa_terms, pose_terms
-    one_sign, inv, cot, sin, sin_max = sine_terms(b[..., 0], b[..., 1])
-    gl = (g_l[..., 0], g_l[..., 1])
-    rc, rs, we = (rc[..., 0], rc[..., 1]), (rs[..., 0], rs[..., 1]), (we_l[..., 0], we_l[..., 1])
-    rs_cot, rs_inv = _mul(*rs, *cot), _mul(*rs, *inv)
-    lam = _sub(*_sub(*_mul(*gl, *inv), *rc), *rs_cot)  # (eq. 1)
-    t_len = _sub(*_mul(*cot, *gl), *we)  # exact if axis-parallel
-    if slanted.size:
-        exact = _affine_range(
-            cot[0][..., slanted],
-            cot[1][..., slanted],
-            x,
-            y,
-            {key: v[:, :, slanted] for key, v in seg.items()},
-        )
-        t_len[0][..., slanted], t_len[1][..., slanted] = exact
-    t_len = _sub(*t_len, *rs_inv)  # (eq. 2)
-    if reading is not None:
-        with np.errstate(invalid="ignore"):  # inf * 0: a no-echo sensor's hi (unused) times
-            # the placeholder 0 of sin B where it changes sign (overwritten below)
-            h = _mul(*_add(*_add(reading[0], reading[1], *rc), *rs_cot), *sin)  # (eq. 3)
-        h = (np.maximum(gl[0], h[0]), np.minimum(gl[1], h[1]))
-        narrowed = _sub(*_sub(*_mul(*cot, *h), *we), *rs_inv)
-        none = h[0] > h[1]
-        t_len = (
-            np.where(none, np.inf, np.maximum(t_len[0], narrowed[0])),
-            np.where(none, -np.inf, np.minimum(t_len[1], narrowed[1])),
-        )
-    lam = (np.where(one_sign, lam[0], -np.inf), np.where(one_sign, lam[1], np.inf))
-    t_len = (np.where(one_sign, t_len[0], -np.inf), np.where(one_sign, t_len[1], np.inf))
-    return lam, t_len, one_sign, sin_max
 
 
 def _axis_pieces(lo: np.ndarray, hi: np.ndarray, count: int) -> np.ndarray:
@@ -347,9 +208,9 @@ def sub_boxes(boxes: np.ndarray, pieces: tuple[int, int, int]) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# Compiled engine: the same operations as the numpy functions above, per (piece, sensor,
-# segment) in scalar loops, with early exits (a sensor's piece is decided as soon as one
-# segment is possible for the hit test and one sure for the free-space test).
+# The kernel: the operations of the numpy reference (intervals.sonar.reference.rays), per
+# (piece, sensor, segment) in scalar loops, with early exits (a sensor's piece is decided as
+# soon as one segment is possible for the hit test and one sure for the free-space test).
 
 
 @numba.njit(cache=True)
@@ -380,7 +241,8 @@ def _k_quotient(c_lo, c_hi, s_lo, s_hi):
 
 @numba.njit(cache=True)
 def _k_sine(b_lo, b_hi, out):
-    """:func:`sine_terms` of one interval into ``out (8,)``: one_sign, inv, cot, sin, big."""
+    """``sine_terms`` of the numpy reference (:mod:`intervals.sonar.reference.rays`) for one
+    interval, into ``out (8,)``: one_sign, inv, cot, sin, big (see the module doc)."""
     tol = TRIG_TOL
     cl, sl, ch, sh = np.cos(b_lo), np.sin(b_lo), np.cos(b_hi), np.sin(b_hi)
     narrow = b_hi - b_lo < MAX_B_WIDTH_RAD
@@ -406,7 +268,7 @@ def _k_sine(b_lo, b_hi, out):
 
 @numba.njit(cache=True)
 def _k_affine_at(c, x_lo, x_hi, y_lo, y_hi, sv):
-    """One end of :func:`_affine_range`; ``sv (5, 2)``: ex, ey, L, det_ae, dot_ae."""
+    """One end of the reference's ``affine_range``; ``sv (5, 2)``: ex, ey, L, det_ae, dot_ae."""
     coef_x = _k_sub(sv[0, 0], sv[0, 1], *_k_mul(c, c, sv[1, 0], sv[1, 1]))
     coef_y = _k_add(sv[1, 0], sv[1, 1], *_k_mul(c, c, sv[0, 0], sv[0, 1]))
     const = _k_sub(*_k_mul(c, c, sv[3, 0], sv[3, 1]), sv[4, 0], sv[4, 1])
@@ -417,7 +279,7 @@ def _k_affine_at(c, x_lo, x_hi, y_lo, y_hi, sv):
 
 @numba.njit(cache=True)
 def _k_meeting(b_lo, b_hi, rc, rs, h, we, x, y, sv, slanted, r_lo, r_hi, narrow_t, trig, out):
-    """:func:`_ray_meeting` for one triple into ``out (4,)``: lambda and t L; returns
+    """The reference's ``ray_meeting`` for one triple into ``out (4,)``: lambda and t L; returns
     ``(one_sign, sin_max)``. ``narrow_t``: apply the contraction with ``[r_lo, r_hi]``."""
     one_sign = _k_sine(b_lo, b_hi, trig)
     inv, cot, sin = (trig[0], trig[1]), (trig[2], trig[3]), (trig[4], trig[5])
@@ -452,7 +314,7 @@ def _k_piece_rejections(
     """Compiled :func:`piece_rejections` on ``parts (P, 3, 2)`` into ``out (P, k)`` bool.
 
     ``pose (P, m, 2, 2)``: h and (w . e) / L; ``seg (m, 5, 2)``: ex, ey, L, det_ae, dot_ae;
-    ``bbox (m, 4)``: the segments' bounding boxes (:func:`_box_gap`);
+    ``bbox (m, 4)``: the segments' bounding boxes;
     ``slanted (m,)`` bool; ``base (D, k, m, 2)``: epsilon - alpha - delta for the hit ray
     (``D = 0``) and the free-space rays; ``kappa (D, k, 2, 2)``: rho cos kappa, rho sin kappa;
     ``kind (k,)`` int8 of :mod:`intervals.sonar.scan`."""
@@ -615,75 +477,18 @@ def _compute_ray_constants(segments, belt, offsets) -> dict:
     }
 
 
-def _box_gap(x, y, bbox):
-    """Lower bound ``(B, 1, m)`` of the distance between the position boxes ``x, y (B, 1, 1,
-    2)`` and the segments' bounding boxes ``(m, 4)``: the largest gap along an axis (rounded
-    down; 0 or negative where they overlap)."""
-    return np.maximum(
-        np.maximum(_down(bbox[:, 0] - x[..., 1]), _down(x[..., 0] - bbox[:, 1])),
-        np.maximum(_down(bbox[:, 2] - y[..., 1]), _down(y[..., 0] - bbox[:, 3])),
-    )
-
-
-def _numpy_pieces(parts, scan, const, reject) -> None:
-    """Reference engine: ``reject (P, k)`` |= the verdicts on ``parts (P, 3, 2)``."""
-    block = max(1, BLOCK_ELEMENTS // (scan.belt.count * scan.segments.shape[0]))
-    for start in range(0, parts.shape[0], block):
-        with np.errstate(invalid="ignore"):  # unbounded boxes: inf - inf, 0 * inf give NaN
-            # bounds, which fail every strict comparison below and so keep the piece
-            _numpy_block(parts[start : start + block], scan, const, reject[start : start + block])
-
-
-def _numpy_block(parts, scan, const, reject) -> None:
-    """One block of :func:`_numpy_pieces` (``reject`` is a view, updated in place)."""
-    seg, rays, rho_hi = const["seg"], const["rays"], const["rho_hi"]
-    slanted = np.flatnonzero(const["slanted"])
-    echo, free = scan.kind == ECHO, scan.kind == FREE
-    lo, hi = scan.ranges[None, :, None, 0], scan.ranges[None, :, None, 1]
-    guard = GUARD_M  # metres, in favour of keeping the box
-    length_lo, length_hi = seg["L"][..., 0], seg["L"][..., 1]
-    part = parts[:, :, None, None]  # (B, 3, 1, 1, 2)
-    x, y, theta = part[:, 0], part[:, 1], part[:, 2]  # (B, 1, 1, 2)
-    pose = _pose_terms(x, y, seg)
-    meetings = [
-        _ray_meeting(
-            ia.sub(base, theta),
-            kappa,
-            pose,
-            x,
-            y,
-            seg,
-            slanted,
-            (lo - guard, hi + guard) if i == 0 else None,
-        )
-        for i, (base, kappa) in enumerate(rays)
-    ]
-    # hit test (delta over the cone): kept unless every segment misses
-    (lam_lo, lam_hi), (t_lo, t_hi), _, sin_max = meetings[0]
-    g_l = pose[0]  # |lambda sin B| >= |g / L| - rho: a line far off a near-parallel ray
-    off_line = _down(np.maximum(g_l[..., 0], -g_l[..., 1]) - rho_hi)
-    misses = (
-        (lam_hi < lo - guard)
-        | (lam_lo > hi + guard)
-        | (t_hi < -guard)
-        | (t_lo > length_hi + guard)
-        | (off_line > _up(_up(hi + guard) * sin_max))
-        | (_box_gap(x, y, const["bbox"]) > _up(_up(hi + guard) + rho_hi))
-    )
-    possible = ~misses.all(axis=-1)
-    # free-space test (fixed offsets): the piece surely meets a segment nearer than lo
-    nearer = np.zeros(possible.shape, dtype=bool)
-    for (lam_lo, lam_hi), (t_lo, t_hi), one_sign, _ in meetings[1:]:
-        nearer |= (
-            one_sign & (lam_lo >= 0.0) & (lam_hi < lo - guard) & (t_lo >= 0.0) & (t_hi <= length_lo)
-        ).any(axis=-1)
-    reject |= (echo & ~possible) | ((echo | free) & nearer)
-
-
 def _compiled_pieces(parts, scan, const, reject) -> None:
-    """Compiled engine (:func:`_k_piece_rejections`), same contract as :func:`_numpy_pieces`."""
+    """``reject (P, k)`` |= the verdicts of :func:`_k_piece_rejections` on ``parts (P, 3, 2)``,
+    in blocks of pieces (the per-(piece, segment) terms are arrays)."""
+    block = max(1, BLOCK_ELEMENTS // scan.segments.shape[0])
+    for start in range(0, parts.shape[0], block):
+        _compiled_block(parts[start : start + block], scan, const, reject[start : start + block])
+
+
+def _compiled_block(parts, scan, const, reject) -> None:
+    """One block of :func:`_compiled_pieces` (``reject`` is a view, updated in place)."""
     seg = const["seg"]
-    g_l, we_l = _pose_terms(
+    g_l, we_l = pose_terms(
         parts[:, 0, None], parts[:, 1, None], {key: v[0] for key, v in seg.items()}
     )  # (P, m, 2) each
     out = np.empty(reject.shape, dtype=np.bool_)
@@ -711,59 +516,52 @@ def _compiled_pieces(parts, scan, const, reject) -> None:
     reject |= out
 
 
-def piece_rejections(
-    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
-) -> np.ndarray:
+def piece_rejections(boxes, scan: SonarScan, pieces=DEFAULT_PIECES) -> np.ndarray:
     """``(N, P, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of piece
     ``j`` of box ``n`` (the sub-boxes of :func:`sub_boxes`, ``P = px * py * pt``).
 
     ``boxes``: pose boxes ``(N, 3, 2)`` (x_m, y_m, theta_rad); ``scan``: readings, belt and map
     (:class:`intervals.sonar.scan.SonarScan`; the scan :meth:`~intervals.sonar.scan.SonarScan.restricted_to`
     the boxes gives the same soundness, faster: it keeps every segment within reach, all the hit
-    test needs, and the free-space test is sound with any subset); ``pieces``: ``(px, py, pt)``;
-    ``engine``: an :class:`~intervals.sonar.engines.Engine`. Sound for the cone model of :mod:`intervals.sonar.cone` at
-    every half-aperture, tight for a ray (see the module doc). The numpy engine is vectorised
-    over pieces, sensors and segments in blocks of about :data:`BLOCK_ELEMENTS` triples; the
-    compiled one loops over them in one call.
+    test needs, and the free-space test is sound with any subset); ``pieces``: ``(px, py, pt)``.
+    Sound for the cone model of :mod:`intervals.sonar.cone` at every half-aperture, tight for a
+    ray (see the module doc). The kernel loops over pieces, sensors and segments, given the
+    terms of about :data:`BLOCK_ELEMENTS` (piece, segment) pairs a call.
     """
+    return rejections_of_pieces(boxes, scan, pieces, _compiled_pieces)
+
+
+def rejections_of_pieces(boxes, scan: SonarScan, pieces, evaluate) -> np.ndarray:
+    """:func:`piece_rejections` with the verdicts on the pieces from ``evaluate(parts (P, 3, 2),
+    scan, constants, reject (P, k))``, which ORs them into ``reject``: the kernel's
+    (:func:`_compiled_pieces`) or the numpy reference's
+    (:mod:`intervals.sonar.reference.rays`), which share the checks, the empty cases and the
+    cutting into pieces here."""
     boxes, pieces = _checked(boxes, scan, pieces)
-    if engine not in tuple(Engine):
-        raise IntervalError(f"ray test: engine must be one of {', '.join(Engine)}, got {engine!r}")
     n, p, k, m = boxes.shape[0], int(np.prod(pieces)), scan.belt.count, scan.segments.shape[0]
     echo = scan.kind == ECHO
     reject = np.broadcast_to(echo & (scan.ranges[:, 0] > scan.ranges[:, 1]), (n * p, k)).copy()
     if m == 0 or n == 0:
         return (reject | echo).reshape(n, p, k)  # an echo needs a segment to come from
     parts = sub_boxes(boxes, pieces).reshape(n * p, 3, 2)
-    if engine == Engine.NUMPY:
-        _numpy_pieces(parts, scan, _ray_constants(scan), reject)
-    else:  # in blocks of pieces: the per-(piece, segment) terms are arrays
-        const, block = _ray_constants(scan), max(1, BLOCK_ELEMENTS // m)
-        for start in range(0, parts.shape[0], block):
-            _compiled_pieces(
-                parts[start : start + block], scan, const, reject[start : start + block]
-            )
+    evaluate(parts, scan, _ray_constants(scan), reject)
     return reject.reshape(n, p, k)
 
 
-def ray_rejections(
-    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, engine: str = "compiled"
-) -> np.ndarray:
+def ray_rejections(boxes, scan: SonarScan, pieces=DEFAULT_PIECES) -> np.ndarray:
     """``(N, k)`` bool: sensor ``i``'s reading is inconsistent with every pose of box ``n``
     (it rejects every piece; see :func:`piece_rejections`)."""
-    return np.asarray(piece_rejections(boxes, scan, pieces, engine).all(axis=1))
+    return np.asarray(piece_rejections(boxes, scan, pieces).all(axis=1))
 
 
-def joint_rejection_counts(
-    boxes, scan: SonarScan, pieces=DEFAULT_PIECES, other=None, engine: str = "compiled"
-) -> np.ndarray:
+def joint_rejection_counts(boxes, scan: SonarScan, pieces=DEFAULT_PIECES, other=None) -> np.ndarray:
     """``(N,)`` int: over the pieces of box ``n``, the smallest number of sensors rejecting the
     piece. A box with a count above ``q`` holds no pose that leaves at most ``q`` readings
     unexplained (each pose lies in some piece). ``other``: ``(N, k)`` rejections of another
     sound test on the whole boxes (e.g. :func:`intervals.sonar.cone.sensor_verdicts`), counted in
     every piece; the count is then at least that test's own count.
     """
-    rejected = piece_rejections(boxes, scan, pieces, engine)
+    rejected = piece_rejections(boxes, scan, pieces)
     if other is not None:
         rejected = rejected | np.asarray(other, dtype=bool)[:, None, :]
     return np.count_nonzero(rejected, axis=2).min(axis=1, initial=rejected.shape[2])
@@ -775,9 +573,8 @@ def joint_rejections(
     q: int = 0,
     pieces=DEFAULT_PIECES,
     other=None,
-    engine: str = "compiled",
 ) -> np.ndarray:
     """``(N,)`` bool: :func:`joint_rejection_counts` above ``q`` (no pose of the box leaves at
     most ``q`` readings unexplained). Stronger than counting :func:`ray_rejections`: one
     sensor may reject some pieces and another sensor the others."""
-    return joint_rejection_counts(boxes, scan, pieces, other, engine) > q
+    return joint_rejection_counts(boxes, scan, pieces, other) > q

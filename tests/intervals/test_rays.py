@@ -14,7 +14,6 @@ import pytest
 from intervals.boxes import contains_points, volume
 from intervals.errors import IntervalError
 from intervals.localize import gomne, localize, uses_ray_test
-from intervals.sonar import rays
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.rays import (
     joint_rejection_counts,
@@ -23,6 +22,7 @@ from intervals.sonar.rays import (
     ray_rejections,
     sub_boxes,
 )
+from intervals.sonar.reference import rays as reference_rays
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams
@@ -160,7 +160,7 @@ def test_sine_terms_enclose_sampled_values():
     rng = np.random.default_rng(8)
     lo = rng.uniform(-10, 10, 2000)
     hi = lo + np.exp(rng.uniform(np.log(1e-9), np.log(3.5), 2000))
-    one_sign, inv, cot, sin, sin_max = rays.sine_terms(lo, hi)
+    one_sign, inv, cot, sin, sin_max = reference_rays.sine_terms(lo, hi)
     assert 0.3 < one_sign.mean() < 0.99
     b = lo[:, None] + (hi - lo)[:, None] * np.linspace(0, 1, 201)
     assert np.all(np.abs(np.sin(b)) <= sin_max[:, None])
@@ -257,7 +257,7 @@ def test_joint_test_rejects_what_no_single_sensor_can():
 
 
 @pytest.mark.slow
-def test_compiled_engine_matches_the_numpy_reference():
+def test_the_kernel_matches_the_numpy_reference():
     """Same verdicts on random cases, thin and wide cones, with edge cases: degenerate and
     unbounded boxes, headings at +-pi and far beyond, boxes wider than the room."""
     rng = np.random.default_rng(9)
@@ -275,11 +275,9 @@ def test_compiled_engine_matches_the_numpy_reference():
         boxes[7, 0] = [-np.inf, np.inf]
         boxes[8] = [[-5.0, 15.0], [-5.0, 15.0], [-4.0, 4.0]]
         pieces = ((1, 1, 1), (1, 1, 4), (2, 2, 1))[case % 3]
-        compiled = piece_rejections(boxes, scan, pieces, engine="compiled")
-        assert np.array_equal(compiled, piece_rejections(boxes, scan, pieces, engine="numpy"))
+        compiled = piece_rejections(boxes, scan, pieces)
+        assert np.array_equal(compiled, reference_rays.piece_rejections(boxes, scan, pieces))
         assert not compiled[7].any() and not compiled[8].any()
-    with pytest.raises(IntervalError, match="engine"):
-        piece_rejections(boxes, scan, engine="fortran")
 
 
 def test_localize_and_gomne_with_the_ray_test_keep_the_truth_in_smaller_sets():

@@ -7,6 +7,7 @@ from intervals.localize import localize
 from intervals.sonar import segment_grid
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.geometry import GUARD_M, segment_box_gap
+from intervals.sonar.reference import cone as reference_cone
 from intervals.sonar.scan import SonarBelt, SonarScan, SonarScene
 from intervals.sonar.segment_grid import SegmentGrid
 from robotsim.maps import point_segment_distance
@@ -98,7 +99,7 @@ def test_compiled_verdicts_with_the_grid_equal_the_references():
         scan, brute = scene.scan(readings), one_cell.scan(readings)
         for current in (scan, scan.restricted_to(boxes[20:])):
             compiled = sensor_verdicts(boxes, current, inner=True)
-            reference = sensor_verdicts(boxes, current, inner=True, engine="numpy")
+            reference = reference_cone.sensor_verdicts(boxes, current, inner=True)
             np.testing.assert_array_equal(compiled[0], reference[0])
             np.testing.assert_array_equal(compiled[1], reference[1])
         np.testing.assert_array_equal(

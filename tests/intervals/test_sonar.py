@@ -11,7 +11,7 @@ from intervals.boxes import contains_points
 from intervals.errors import IntervalError
 from intervals.localize import box_test, gomne, localize
 from intervals.sivia import OUTSIDE
-from intervals.sonar.cone import sensor_boxes
+from intervals.sonar.reference.cone import sensor_boxes
 from intervals.sonar.scan import SonarBelt, SonarScan, reading_intervals
 from robotsim.maps import builtin_map
 from robotsim.sensors.sonar import SonarBeltParams

@@ -1,4 +1,5 @@
-"""The compiled sonar box test (``intervals.sonar.cone_kernel``) against its numpy reference.
+"""The compiled sonar box test (``intervals.sonar.cone_kernel``) against its numpy reference
+(``intervals.sonar.reference``).
 
 Random maps, poses, belts (the default one and random non-radial ones, apertures from 1e-3 to
 1.2 rad), readings with errors at their bounds, outliers, lost echoes (ignored, or free space
@@ -13,14 +14,17 @@ import dataclasses
 import numpy as np
 import pytest
 
+import intervals.localize as localize_module
 from intervals.errors import IntervalError
 from intervals.interval import TRIG_EXACT_LIMIT_RAD
 from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE
-from intervals.sonar import cone_kernel
-from intervals.sonar.cone import heading_trig, sensor_boxes, sensor_verdicts
-from intervals.sonar.engines import Engine
+from intervals.sonar import cone_kernel, rays
+from intervals.sonar.cone import heading_trig, sensor_verdicts
 from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M
+from intervals.sonar.reference import cone as reference_cone
+from intervals.sonar.reference import reference_box_tests
+from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
 from robotsim.maps import builtin_map
@@ -111,15 +115,16 @@ def test_compiled_verdicts_equal_the_numpy_reference():
     for _ in range(200):
         scan, boxes = _case(rng)
         for inner in (True, False):
-            reference = sensor_verdicts(boxes, scan, inner, engine="numpy")
-            compiled = sensor_verdicts(boxes, scan, inner, engine="compiled")
+            reference = reference_cone.sensor_verdicts(boxes, scan, inner)
+            compiled = sensor_verdicts(boxes, scan, inner)
             np.testing.assert_array_equal(compiled[0], reference[0])
             np.testing.assert_array_equal(compiled[1], reference[1])
             seen["sensor_verdicts"] += 2 * reference[0].size
             seen["certain"] += np.count_nonzero(reference[1])
         for q in (0, 1, 3):
-            verdicts = box_test(boxes, scan, q, inner=q < 3, engine="numpy")
-            np.testing.assert_array_equal(box_test(boxes, scan, q, q < 3, "compiled"), verdicts)
+            with reference_box_tests():
+                verdicts = box_test(boxes, scan, q, inner=q < 3)
+            np.testing.assert_array_equal(box_test(boxes, scan, q, q < 3), verdicts)
             seen["inside"] += np.count_nonzero(verdicts == INSIDE)
             seen["outside"] += np.count_nonzero(verdicts == OUTSIDE)
         seen["reject"] += np.count_nonzero(reference[0])
@@ -144,7 +149,7 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
         boxes = np.ascontiguousarray(
             np.concatenate([boxes_around(truth, rng, 20), _special_boxes(truth, rng)])
         )
-        reference = sensor_boxes(boxes, belt)
+        reference = reference_cone.sensor_boxes(boxes, belt)
         cos_theta, sin_theta = heading_trig(boxes)
         rows = np.empty((belt.count, cone_kernel.SENSOR_COLUMNS))
         for n in range(boxes.shape[0]):
@@ -172,17 +177,17 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
     assert rows_checked == 20 * 80
 
 
-def test_paving_and_tracking_agree_between_engines():
+def test_paving_and_tracking_agree_with_the_references():
     """SIVIA, GOMNE (q_max 2, inner boxes on and off) and tracker epochs in ``hall`` give the
-    same boxes with either engine."""
+    same boxes on the kernels and on the numpy references (:func:`reference_box_tests`), with
+    and without the ray test; outside the block the kernels are back."""
     hall = builtin_map("hall")
     belt = SonarBelt.from_params(PARAMS, echoes_never_lost=True)
     rng = np.random.default_rng(33)
-    trackers = {
-        engine: IntervalTracker(TrackerSettings(0.5, 0.5, q_max=1, engine=engine), hall.bounds)
-        for engine in Engine
-    }
-    previous = dict.fromkeys(Engine)
+    settings = TrackerSettings(0.5, 0.5, q_max=1)
+    kernel_tracker = IntervalTracker(settings, hall.bounds)
+    reference_tracker = IntervalTracker(settings, hall.bounds)
+    kernel_previous = reference_previous = None
     for truth in ([2.0, 6.0, 3.1], [5.0, 3.0, -3.1], [5.2, 3.1, -2.8]):
         truth = np.array(truth)
         readings = bounded_readings(cone_ranges(truth, hall.segments), PARAMS, rng)
@@ -190,27 +195,43 @@ def test_paving_and_tracking_agree_between_engines():
         scan = SonarScan(hall.segments, belt, readings, hall.boundary)
         prior = np.stack([truth - [0.4, 0.4, 0.2], truth + [0.4, 0.4, 0.2]], axis=-1)
         for inner in (False, True):
-            a, b = (gomne(scan, prior, 0.05, 2, inner=inner, engine=e) for e in Engine)
+            a = gomne(scan, prior, 0.05, 2, inner=inner)
+            with reference_box_tests():
+                b = gomne(scan, prior, 0.05, 2, inner=inner)
             assert a.q == b.q and a.q_set == b.q_set
             np.testing.assert_array_equal(a.paving.inner, b.paving.inner)
             np.testing.assert_array_equal(a.paving.boundary, b.paving.boundary)
             assert a.paving.contains(truth[None])[0]
-        a, b = (localize(scan, prior, 0.05, q=0, engine=e) for e in Engine)
+        a = localize(scan, prior, 0.05, q=0, ray_test=True)
+        with reference_box_tests():
+            b = localize(scan, prior, 0.05, q=0, ray_test=True)
         np.testing.assert_array_equal(a.outer, b.outer)
-        steps = {e: trackers[e].step(previous[e], scan, 1.0) for e in Engine}
-        assert steps["numpy"].status == steps["compiled"].status
-        np.testing.assert_array_equal(steps["numpy"].outer, steps["compiled"].outer)
-        previous = {e: steps[e].paving for e in Engine}
+        kernel_step = kernel_tracker.step(kernel_previous, scan, 1.0)
+        with reference_box_tests():
+            reference_step = reference_tracker.step(reference_previous, scan, 1.0)
+        assert reference_step.status == kernel_step.status
+        np.testing.assert_array_equal(reference_step.outer, kernel_step.outer)
+        kernel_previous, reference_previous = kernel_step.paving, reference_step.paving
+    assert localize_module.sensor_verdicts is sensor_verdicts
+    assert localize_module.room_verdicts is room_verdicts
+    assert rays.piece_rejections.__module__ == "intervals.sonar.rays"
 
 
-def test_bad_engine_or_box_shape_is_refused():
+def test_the_reference_switch_restores_the_kernels_after_an_error():
+    with pytest.raises(ZeroDivisionError), reference_box_tests():
+        assert localize_module.sensor_verdicts is reference_cone.sensor_verdicts
+        _ = 1 / 0
+    assert localize_module.sensor_verdicts is sensor_verdicts
+    assert localize_module.room_verdicts is room_verdicts
+    assert rays.piece_rejections.__module__ == "intervals.sonar.rays"
+
+
+def test_bad_box_shape_is_refused():
     scan = SonarScan(
         builtin_map("hall").segments, SonarBelt.from_params(PARAMS), np.full(PARAMS.count, 1.0)
     )
     box = np.array([[1.0, 2.0], [1.0, 2.0], [0.0, 0.1]])
-    with pytest.raises(IntervalError, match="engine"):
-        sensor_verdicts(box, scan, engine="fortran")
-    with pytest.raises(IntervalError, match="engine"):
-        TrackerSettings(0.5, 0.5, engine="fortran")
     with pytest.raises(IntervalError, match=r"\(N, 3, 2\)"):
         sensor_verdicts(box[:2], scan)
+    with pytest.raises(IntervalError, match=r"\(N, 3, 2\)"):
+        reference_cone.sensor_verdicts(box[:2], scan)

@@ -8,7 +8,6 @@ import pytest
 
 from intervals.boxes import unwrap_headings
 from intervals.errors import IntervalError
-from intervals.sonar.engines import Engine
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map
@@ -132,7 +131,6 @@ def test_heading_unwrap_and_settings_errors():
         ({"q_max": -1}, "q_max must be >= 0, got -1"),
         ({"q_max": 1.0}, "q_max must be an integer"),
         ({"v_max_m_s": -1.0}, "v_max_m_s must be >= 0"),
-        ({"engine": "fortran"}, "engine must be one of 'compiled', 'numpy'"),
         ({"guaranteed": 1}, "guaranteed must be True or False"),
         ({"ray_test": "auto"}, "ray_test must be True, False or None"),
         ({"imagesp_pitch_m": 0.01}, "imagesp_pitch_m must be >= eps_m"),
@@ -140,8 +138,8 @@ def test_heading_unwrap_and_settings_errors():
         kwargs = {"v_max_m_s": 0.5, "omega_max_rad_s": 0.5, **bad}
         with pytest.raises(IntervalError, match=re.escape(f"TrackerSettings.{reason}")):
             TrackerSettings(**kwargs)
-    chosen = TrackerSettings(0.5, 0.5, tracker="imagesp", engine="numpy")
-    assert chosen.tracker is Tracker.IMAGESP and chosen.engine is Engine.NUMPY
+    chosen = TrackerSettings(0.5, 0.5, tracker="imagesp")
+    assert chosen.tracker is Tracker.IMAGESP
     assert TrackerSettings(0.5, 0.5).q_max == 1  # the scenario files' documented default
     with pytest.raises(IntervalError, match="map bounds"):
         IntervalTracker(TrackerSettings(0.5, 0.5), np.zeros((2, 2)))
