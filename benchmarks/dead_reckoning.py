@@ -10,8 +10,9 @@ Data: the sensor log of 600 s on ``hall`` (the default route of the simulator's 
   ``(2, 8)`` = the UKF-only and the fused branch on the same data, without fusion (one call
   for the whole run) and with the paper's clamp once a second (600 epochs, 601 calls: the
   pipeline's pattern);
-- the library's generic filter classes (``engine="generic"``: ``UnscentedKalmanFilter`` and
-  its siblings in ``localization.ukf``/``iukf``/``ekf``, the reference) on the first
+- the library's generic filter classes (``localization.reference.dead_reckoning``:
+  ``UnscentedKalmanFilter`` and its siblings in ``localization.ukf``/``iukf``/``ekf``, the
+  reference) on the first
   ``--generic-steps`` samples, per step, and the ratio generic / compiled;
 - a Monte Carlo batch of ``--runs`` runs x 2 branches, per run-step.
 The compiled kernels are loaded (or compiled) before the timings.
@@ -38,6 +39,7 @@ from localization.dead_reckoning import (
     run_dead_reckoning,
 )
 from localization.fusion import fuse
+from localization.reference.dead_reckoning import GenericDeadReckoning
 from robotsim.control import Route
 from robotsim.maps import builtin_map
 from robotsim.simulation import simulate
@@ -83,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def run_generic(settings: DeadReckoningSettings, count: int) -> None:
         """A fresh generic filter over samples ``1..count`` (its construction timed too)."""
-        DeadReckoning(data, initial, settings).run(count)
+        GenericDeadReckoning(data, initial, settings).run(count)
 
     epochs = range(100, data.count, 100)
     DeadReckoning(data, initial).run(1)  # load (or compile) the kernels before any timing
@@ -95,8 +97,7 @@ def main(argv: list[str] | None = None) -> int:
             partial(run_dead_reckoning, data, initial, settings, epochs, clamp), args.repeats
         )
         short = min(args.generic_steps, steps)
-        generic = DeadReckoningSettings(filter=name, engine="generic")
-        generic_s = best_seconds(partial(run_generic, generic, short), 1) / short * steps
+        generic_s = best_seconds(partial(run_generic, settings, short), 1) / short * steps
         rows.append((name, plain, fused, generic_s))
 
     ticks = np.repeat(log.wheel_ticks[:, None, :], 2 * args.runs, axis=1)

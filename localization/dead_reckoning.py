@@ -44,7 +44,7 @@ ticks counts the turn from ``k - 1`` to ``k``):
       gyro      = omega + b_gyro
 
   The products ``omega d_wheel`` and ``v d_wheel`` are taken with ESTIMATES made before the
-  step's encoder data in place of ``omega`` and ``v`` (:func:`measurement_matrix`): the
+  step's encoder data in place of ``omega`` and ``v`` (``measurement_matrix``): the
   predicted ``omega^-(k)``, and the speed predicted from two steps back, ``v^-(k)`` less the
   update's correction of ``v`` at ``k - 1`` (the neglected ``d (v - v^) / L`` is ~1e-5 rad/s),
   so the measurement is linear in the state with a matrix ``H(k)`` fixed before the update.
@@ -77,19 +77,21 @@ Speed: the generic filter classes (``localization.ukf``, ``iukf``, ``ekf``), ste
 at 100 Hz, against a budget of 6 s for the whole pipeline). :class:`DeadReckoning` therefore
 runs a compiled step specialised to this model (:mod:`localization.compiled.dead_reckoning`,
 numba), still the same filter: the unscented prediction with the same sigma points and moments
-as the generic one (or the EKF prediction), and the closed-form update that equals the
-unscented one for the linear ``h`` (``tests/localization/test_dead_reckoning.py`` checks it
-against the generic filter classes: ~1e-13 for the EKF and the kappa points; ~1e-8 over 300
-steps for the scaled points, whose ``1 / gamma^2`` amplifies rounding, as between any two
-implementations). One call runs a whole ``run()`` stretch, all samples and all runs, and writes
-the history in place. Measured (``benchmarks/dead_reckoning.py``, 600 s of ``hall``, batch of
-two): 3.3 us a step for ``ukf``/``iukf``, 1.9 us for ``ekf``, 80-115 times the generic filters;
-in the pipeline (600 calls) 0.23 s instead of 4.4 s. The first run on a machine compiles the
-kernel (about 3 s; cached beside the module after that). The heading is kept unwrapped inside
-the loop (the model is periodic in it) and wrapped in the history and the belief; sigma-point
-heading offsets are wrapped as in the generic filter when the points are wide (``gamma >=
-0.01``, e.g. the IUKF's kappa points), and not for the scaled points (``gamma ~ 3e-3``), where
-that needs ``sigma_theta < pi / gamma`` (1000 rad; checked)."""
+as the generic one (or the EKF prediction), and the closed-form update that equals the unscented
+one for the linear ``h`` (``tests/localization/test_dead_reckoning.py`` checks it against the
+generic filter classes, run by the reference
+:class:`localization.reference.dead_reckoning.GenericDeadReckoning`: ~1e-13 for the EKF and the
+kappa points; ~1e-8 over 300 steps for the scaled points, whose ``1 / gamma^2`` amplifies
+rounding, as between any two implementations). One call runs a whole ``run()`` stretch, all
+samples and all runs, and writes the history in place. Measured
+(``benchmarks/dead_reckoning.py``, 600 s of ``hall``, batch of two): 3.3 us a step for
+``ukf``/``iukf``, 1.9 us for ``ekf``, 80-115 times the generic filters; in the pipeline (600
+calls) 0.23 s instead of 4.4 s. The first run on a machine compiles the kernel (about 3 s;
+cached beside the module after that). The heading is kept unwrapped inside the loop (the model
+is periodic in it) and wrapped in the history and the belief; sigma-point heading offsets are
+wrapped as in the generic filter when the points are wide (``gamma >= 0.01``, e.g. the IUKF's
+kappa points), and not for the scaled points (``gamma ~ 3e-3``), where that needs ``sigma_theta
+< pi / gamma`` (1000 rad; checked)."""
 
 from __future__ import annotations
 
@@ -101,23 +103,11 @@ from enum import StrEnum
 import numpy as np
 
 from localization.compiled import dead_reckoning as kernel
-from localization.compiled.dead_reckoning import (
-    B_GYRO,
-    D_WHEEL,
-    N_STATES,
-    OMEGA,
-    THETA,
-    V,
-    run_steps,
-)
-from localization.ekf import ExtendedKalmanFilter, IteratedExtendedKalmanFilter
+from localization.compiled.dead_reckoning import N_STATES, THETA, run_steps
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
-from localization.iukf import IteratedUnscentedKalmanFilter
 from localization.linalg import wrap_angle
-from localization.models import MeasurementModel, ProcessModel
 from localization.sigma_points import KappaSigmaPoints, ScaledSigmaPoints, SigmaPointScheme
-from localization.ukf import UnscentedKalmanFilter
 from validated_records import bounded, validate_fields
 
 STATE_NAMES = (
@@ -298,31 +288,6 @@ def transition_jacobian(state: np.ndarray, accel_m_s2, dt_s: float) -> np.ndarra
     return out.reshape(state.shape[:-1] + (N_STATES, N_STATES))
 
 
-def measurement_matrix(regressor: np.ndarray, wheel_base_m: float) -> np.ndarray:
-    """``H (..., 3, 8)`` of ``(v_enc, omega_enc, gyro)``: the products ``omega d_wheel`` and
-    ``v d_wheel`` with ``omega`` and ``v`` taken from ``regressor (..., 8)``, an estimate made
-    before the step's encoder data: the filter passes the predicted state with the speed
-    predicted from two steps back (module docstring)."""
-    h_matrix = np.zeros(regressor.shape[:-1] + (3, N_STATES))
-    h_matrix[..., 0, V] = 1.0
-    h_matrix[..., 0, D_WHEEL] = -0.25 * wheel_base_m * regressor[..., OMEGA]
-    h_matrix[..., 1, OMEGA] = 1.0
-    h_matrix[..., 1, D_WHEEL] = -regressor[..., V] / wheel_base_m
-    h_matrix[..., 2, OMEGA] = 1.0
-    h_matrix[..., 2, B_GYRO] = 1.0
-    return h_matrix
-
-
-def measure(state: np.ndarray, h_matrix: np.ndarray) -> np.ndarray:
-    """``h(s) = H s`` ``(..., 3)`` = predicted ``(v_enc, omega_enc, gyro)``; ``h_matrix (..., 3, 8)``."""
-    return (h_matrix @ state[..., None])[..., 0]
-
-
-def measure_jacobian(state: np.ndarray, h_matrix: np.ndarray) -> np.ndarray:
-    """``dh/ds = H``, broadcast to ``(..., 3, 8)``."""
-    return np.broadcast_to(h_matrix, np.broadcast_shapes(state.shape[:-1] + (1, 1), h_matrix.shape))
-
-
 @dataclass(frozen=True, eq=False)
 class OdometryData:
     """The sensor arrays turned into the filter's per-sample inputs (one vectorised pass).
@@ -333,7 +298,7 @@ class OdometryData:
         accel_input_m_s2: ``(N,)`` or ``(N, B)`` forward accelerometer input of the step
             ending at ``k`` (mean of readings ``k - 1`` and ``k``; row 0 unused).
         z: ``(N, [B,] 3)`` measurements ``(v_enc_m_s, omega_enc_rad_s, gyro_rad_s)``.
-        wheel_base_m: ``L``, for the measurement matrices (:func:`measurement_matrix`).
+        wheel_base_m: ``L``, for the measurement matrices ``H(k)``.
         R: ``(3, 3)`` measurement noise; Q: ``(8, 8)`` process noise per step.
     """
 
@@ -353,15 +318,6 @@ class OdometryData:
     def per_run(self) -> bool:
         """True when the data carry a batch axis ``(N, B, ...)``."""
         return self.z.ndim == 3
-
-    def process_model(self) -> ProcessModel:
-        """The model as the generic filter classes consume it (additive noise, with its Jacobian)."""
-        return ProcessModel(transition, self.Q, jacobian=transition_jacobian)
-
-    def measurement_model(self) -> MeasurementModel:
-        """``z = H(k) s + v``; the step passes ``H(k)`` (:func:`measurement_matrix`) as the
-        argument of ``h``."""
-        return MeasurementModel(measure, self.R, jacobian=measure_jacobian)
 
 
 def odometry_data(
@@ -443,15 +399,6 @@ class Filter(StrEnum):
         return self in (Filter.UKF, Filter.IUKF)
 
 
-class StepEngine(StrEnum):
-    """How the dead-reckoning steps run."""
-
-    COMPILED = "compiled"
-    """The step specialised to this model (:mod:`localization.compiled.dead_reckoning`)."""
-    GENERIC = "generic"
-    """The generic filter classes step by step: the reference, about a hundred times slower."""
-
-
 @dataclass(frozen=True)
 class DeadReckoningSettings:
     """Which filter runs the dead reckoning, and how (validated at construction).
@@ -460,13 +407,10 @@ class DeadReckoningSettings:
         filter: a :class:`Filter` (or its value; the scenario's ``estimation.filter``).
         points: sigma points of the unscented filters; ``None`` takes each filter's default
             (scaled points ``alpha = 1e-3`` for the UKF, kappa points for the IUKF, paper 000).
-        engine: a :class:`StepEngine` (or its value): ``"compiled"`` (default) or
-            ``"generic"``.
     """
 
     filter: Filter = Filter.UKF
     points: SigmaPointScheme | None = None
-    engine: StepEngine = StepEngine.COMPILED
 
     def __post_init__(self) -> None:
         validate_fields(self, EstimationError)
@@ -485,16 +429,6 @@ class DeadReckoningSettings:
         if self.points is not None:
             return self.points
         return KappaSigmaPoints() if self.filter == Filter.IUKF else ScaledSigmaPoints(alpha=1e-3)
-
-    def generic_filter(self):
-        """The generic filter object for this setting."""
-        if self.filter == Filter.UKF:
-            return UnscentedKalmanFilter(points=self.sigma_points())
-        if self.filter == Filter.IUKF:
-            return IteratedUnscentedKalmanFilter(points=self.sigma_points())
-        if self.filter == Filter.EKF:
-            return ExtendedKalmanFilter()
-        return IteratedExtendedKalmanFilter()
 
 
 @dataclass(frozen=True, eq=False)
@@ -577,12 +511,7 @@ class DeadReckoning:
         self._record(0)
         self._buffers: tuple[np.ndarray, np.ndarray] | None = None  # (accel, z) grown by extend
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
-        if settings.engine == StepEngine.COMPILED:
-            self._compiled = _CompiledStep(data, settings)
-        else:
-            self._generic = settings.generic_filter()
-            self._process = data.process_model()
-            self._measurement = data.measurement_model()
+        self._compiled = _CompiledStep(data, settings)
 
     @property
     def belief(self) -> Gaussian:
@@ -653,8 +582,7 @@ class DeadReckoning:
         accel, z = self._buffers
         accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
         self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
-        if self.settings.engine == StepEngine.COMPILED:  # views of the buffers, not copies
-            self._compiled.bind(self.data)
+        self._compiled.bind(self.data)  # views of the buffers, not copies
 
     def run(self, until_index: int) -> Gaussian:
         """Advance to sample ``until_index`` (inclusive) and return the belief there.
@@ -672,55 +600,28 @@ class DeadReckoning:
             )
         start = self.index + 1
         if until_index >= start:
-            if self.settings.engine == StepEngine.COMPILED:
-                self._mean, self._cov, self._speed_correction = self._compiled.run(
-                    self._mean,
-                    self._cov,
-                    self._speed_correction,
-                    start,
-                    until_index + 1,
-                    self._mean_hist,
-                    self._cov_hist,
-                    self._nis_hist,
-                )
-            else:
-                self._run_generic(start, until_index + 1)
+            self._steps(start, until_index + 1)
             self.index = until_index
         return self.belief
 
-    def _run_generic(self, start: int, stop: int) -> None:
-        data, filt = self.data, self._generic
-        batch = self._mean.shape[0]
-        belief = Gaussian.trusted(self._mean, self._cov, ANGLE_INDICES)
-        for k in range(start, stop):
-            accel = data.accel_input_m_s2[k]
-            accel = accel if data.per_run else np.full(batch, accel)
-            z = np.broadcast_to(data.z[k], (batch, 3))
-            predicted = filt.predict(belief, self._process, accel, data.dt_s)
-            regressor = np.array(predicted.mean)
-            regressor[:, V] -= self._speed_correction
-            h = measurement_matrix(regressor, data.wheel_base_m)
-            self._nis_hist[k] = innovation_nis(predicted, z, h, data.R)
-            belief = filt.update(predicted, z, self._measurement, h)
-            self._speed_correction = belief.mean[:, V] - predicted.mean[:, V]
-            self._mean, self._cov = belief.mean, belief.cov
-            self._record(k)
+    def _steps(self, start: int, stop: int) -> None:
+        """Samples ``start..stop-1`` from the current belief, recorded (the compiled step)."""
+        self._mean, self._cov, self._speed_correction = self._compiled.run(
+            self._mean,
+            self._cov,
+            self._speed_correction,
+            start,
+            stop,
+            self._mean_hist,
+            self._cov_hist,
+            self._nis_hist,
+        )
 
     def _record(self, k: int) -> None:
         self._mean_hist[k] = self._mean
         self._mean_hist[k, :, THETA] = wrap_angle(self._mean[:, THETA])
         recorded = self._cov_hist.shape[-1]
         self._cov_hist[k] = self._cov[:, :recorded, :recorded]
-
-
-def innovation_nis(
-    predicted: Gaussian, z: np.ndarray, h: np.ndarray, r_cov: np.ndarray
-) -> np.ndarray:
-    """``(B,)`` the NIS ``nu^T S^-1 nu`` of the linear update of ``predicted (B, 8)`` by
-    ``z (B, 3)`` with ``h (B, 3, 8)``: ``nu = z - H x-``, ``S = H P- H^T + R``."""
-    nu = z - np.einsum("bij,bj->bi", h, predicted.mean)
-    s_cov = h @ predicted.cov @ h.mT + r_cov
-    return np.einsum("bi,bi->b", nu, np.linalg.solve(s_cov, nu[..., None])[..., 0])
 
 
 def _compiled_input(values) -> np.ndarray:
@@ -805,8 +706,8 @@ class _CompiledStep:
             and (self.gamma**2 * cov[:, THETA, THETA]).max() >= math.pi**2
         ):
             raise EstimationError(
-                "dead reckoning: the heading is too uncertain for the compiled step (gamma * sigma_theta >= pi); "
-                "use engine='generic' or sigma points with gamma >= 0.01"
+                "dead reckoning: the heading is too uncertain for the scaled sigma points (gamma * sigma_theta >= pi); "
+                "use sigma points with gamma >= 0.01 (e.g. the IUKF's kappa points)"
             )
         return mean, cov, speed_correction
 

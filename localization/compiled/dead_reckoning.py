@@ -192,7 +192,7 @@ def _linear_update(
     of the innovation, or ``-1.0`` when ``S`` is not positive definite (then nothing is
     changed).
 
-    ``H(k)`` as :func:`localization.dead_reckoning.measurement_matrix` builds it, with the
+    ``H(k)`` as :func:`localization.reference.dead_reckoning.measurement_matrix` builds it, with the
     regressor ``(omega, v)`` = the predicted ``omega`` and the predicted ``v`` less
     ``speed_correction`` (the previous update's correction of ``v``). Work buffers:
     ``h (3, 8)``, ``cross (8, 3)``, ``s_cov``, ``s_chol (3, 3)``, ``gain_t (3, 8)``, ``innovation (3,)``.

@@ -1,7 +1,8 @@
 """The dead-reckoning filter on simulated logs: closed-form motions, tracking with a drift
 that grows with time, covariance consistency (NEES), the compiled step against the generic
 filter classes of ``localization`` (``UnscentedKalmanFilter`` and its siblings stepped one
-sample at a time: the reference), batched against looped, and its refusals."""
+sample at a time by ``localization.reference.dead_reckoning``: the reference), batched
+against looped, and its refusals."""
 
 from __future__ import annotations
 
@@ -11,10 +12,9 @@ import math
 import numpy as np
 import pytest
 
+from localization.compiled.dead_reckoning import B_GYRO, D_WHEEL
 from localization.dead_reckoning import (
     ANGLE_INDICES,
-    B_GYRO,
-    D_WHEEL,
     N_STATES,
     THETA,
     DeadReckoning,
@@ -29,6 +29,7 @@ from localization.dead_reckoning import (
 )
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
+from localization.reference.dead_reckoning import GenericDeadReckoning
 from robotsim.control import Route, ScriptedProfile
 from robotsim.maps import builtin_map
 from robotsim.robot import RobotParams
@@ -193,18 +194,16 @@ def test_compiled_step_equals_the_generic_filters(route_logs, name):
         ANGLE_INDICES,
     )
     results = {}
-    for engine in ("compiled", "generic"):
-        runner = DeadReckoning(
-            data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True
-        )
+    for kind in (DeadReckoning, GenericDeadReckoning):
+        runner = kind(data, initial, DeadReckoningSettings(filter=name), record_full_cov=True)
         runner.run(150)
         nudged = runner.belief
         runner.replace(
             Gaussian(nudged.mean + [0.1, -0.1, 0.05, 0, 0, 0, 0, 0], nudged.cov, ANGLE_INDICES)
         )
         runner.run(steps - 1)
-        results[engine] = runner.history
-    assert_same_history(results["compiled"], results["generic"], 1e-8, 1e-9)
+        results[kind] = runner.history
+    assert_same_history(results[DeadReckoning], results[GenericDeadReckoning], 1e-8, 1e-9)
 
 
 def assert_same_history(compiled, generic, mean_atol, cov_rtol):
@@ -238,18 +237,18 @@ def test_compiled_step_equals_the_generic_filters_across_the_heading_wrap(
     mean[:, 4] = [0.3, -0.3]  # turning both ways from the start
     initial = Gaussian(mean, start.cov, ANGLE_INDICES)
     histories = {}
-    for engine in ("compiled", "generic"):
-        runner = DeadReckoning(
-            data, initial, DeadReckoningSettings(filter=name, engine=engine), record_full_cov=True
-        )
+    for kind in (DeadReckoning, GenericDeadReckoning):
+        runner = kind(data, initial, DeadReckoningSettings(filter=name), record_full_cov=True)
         runner.run(200)
-        histories[engine] = runner.history
-    heading = histories["compiled"].mean[..., THETA]
+        histories[kind] = runner.history
+    heading = histories[DeadReckoning].mean[..., THETA]
     assert ((heading >= -math.pi) & (heading < math.pi)).all()
     assert (
         (np.abs(heading) > 3.0).all() and (heading > 0).any() and (heading < 0).any()
     )  # both sides, near pi
-    assert_same_history(histories["compiled"], histories["generic"], tolerance, tolerance)
+    assert_same_history(
+        histories[DeadReckoning], histories[GenericDeadReckoning], tolerance, tolerance
+    )
 
 
 def test_iterated_filters_equal_their_plain_ones_on_the_linear_measurement(route_logs):
@@ -259,9 +258,7 @@ def test_iterated_filters_equal_their_plain_ones_on_the_linear_measurement(route
     pairs = [("ekf", "iekf", None), ("ukf", "iukf", points)]
     for plain, iterated, scheme in pairs:
         histories = [
-            DeadReckoning(
-                data, initial, DeadReckoningSettings(filter=f, points=scheme, engine="generic")
-            )
+            GenericDeadReckoning(data, initial, DeadReckoningSettings(filter=f, points=scheme))
             for f in (plain, iterated)
         ]
         for runner in histories:
@@ -342,8 +339,6 @@ def test_bad_inputs_are_refused_with_a_clear_message(route_logs):
         NominalRobot(0.05, -0.3, 2048)
     with pytest.raises(EstimationError, match="filter must be one of"):
         DeadReckoningSettings(filter="kalman")
-    with pytest.raises(EstimationError, match="engine must be one of 'compiled', 'generic'"):
-        DeadReckoningSettings(engine="fast")
     runner = DeadReckoning(data_of(log), initial_belief(START, [0.01] * 3))
     runner.run(10)
     with pytest.raises(EstimationError, match="until_index"):
@@ -356,8 +351,8 @@ def test_wide_heading_uncertainty_compiled_equals_generic_or_is_refused(route_lo
     data = data_of(route_logs[0])
     wide = initial_belief(START, [0.01, 0.01, 2.5])  # kappa points reach 4.3 rad from the mean
     runs = [
-        DeadReckoning(data, wide, DeadReckoningSettings(filter="iukf", engine=e))
-        for e in ("compiled", "generic")
+        kind(data, wide, DeadReckoningSettings(filter="iukf"))
+        for kind in (DeadReckoning, GenericDeadReckoning)
     ]
     for runner in runs:
         runner.run(50)
