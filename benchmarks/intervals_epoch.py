@@ -12,11 +12,12 @@ scenario's run (``--pipeline-s`` simulated seconds, 0 to skip) with its ``[estim
 settings (SIVIA, ``q_max`` 1, guaranteed, the robot's physical limits), as ``robotsim run``
 steps it (only the interval epochs are timed).
 
-Every case runs both engines of the sonar box test (:class:`intervals.sonar.engines.Engine`: the
-numpy reference and the compiled kernel) on the same scans, interleaved scan by scan, and
-reports their times side by side with the median per-epoch speed-up; it exits 1 as well if
-their sets differ. The compiled kernel is loaded (compiled, on a fresh checkout) by one
-warm-up epoch before any timing.
+Every case runs both implementations of the sonar box tests (the numpy references of
+:mod:`intervals.sonar.reference`, through :func:`~intervals.sonar.reference.reference_box_tests`,
+and the compiled kernels) on the same scans, interleaved scan by scan, and reports their times
+side by side with the median per-epoch speed-up; it exits 1 as well if their sets differ. The
+compiled kernel is loaded (compiled, on a fresh checkout) by one warm-up epoch before any
+timing.
 
     python benchmarks/intervals_epoch.py [--epochs 200] [--global-runs 20] [--repeat 3] [--seed 0]
                                          [--pipeline-s 600]
@@ -25,7 +26,7 @@ warm-up epoch before any timing.
 from __future__ import annotations
 
 import argparse
-import dataclasses
+import contextlib
 import sys
 import time
 from functools import partial
@@ -33,11 +34,19 @@ from functools import partial
 import numpy as np
 
 from intervals.localize import localize
-from intervals.sonar.engines import Engine
+from intervals.sonar.reference import reference_box_tests
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
+
+IMPLEMENTATIONS = ("numpy", "compiled")
+"""The box tests timed side by side: the numpy references and the kernels."""
+
+
+def _running(impl: str):
+    """The context in which the pipeline runs the implementation ``impl``."""
+    return reference_box_tests() if impl == "numpy" else contextlib.nullcontext()
 
 
 def _random_poses(segment_map, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -68,19 +77,19 @@ def _scan(segment_map, params, belt, truth, rng) -> SonarScan:
 
 
 def _step_both(trackers, previous, scan, dt_s, repeat):
-    """One tracker epoch per engine on the same scan, interleaved: ``(results, best_s)`` dicts
-    keyed by engine (the best of ``repeat`` identical runs each)."""
+    """One tracker epoch per implementation on the same scan, interleaved: ``(results, best_s)``
+    dicts keyed by implementation (the best of ``repeat`` identical runs each)."""
     results, best = {}, {}
-    for engine in Engine:
-        results[engine], best[engine] = _best_of(
-            lambda e=engine: trackers[e].step(previous[e], scan, dt_s), repeat
+    for impl in IMPLEMENTATIONS:
+        results[impl], best[impl] = _best_of(
+            lambda i=impl: trackers[i].step(previous[i], scan, dt_s), repeat, impl
         )
     return results, best
 
 
 def _same_sets(results) -> bool:
-    """Every engine returned the same status and the same boxes."""
-    first = results[Engine.COMPILED]
+    """Every implementation returned the same status and the same boxes."""
+    first = results["compiled"]
     return all(
         r.status == first.status and np.array_equal(r.outer, first.outer) for r in results.values()
     )
@@ -96,23 +105,16 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
     scans = [_scan(hall, params, belt, p, rng) for p in poses]
     rows = []
     for kind in Tracker:
-        trackers = {
-            engine: IntervalTracker(
-                TrackerSettings(
-                    v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind, engine=engine
-                ),
-                hall.bounds,
-            )
-            for engine in Engine
-        }
-        previous = dict.fromkeys(Engine)
-        times, boxes, areas, kept, differ = {e: [] for e in Engine}, [], [], 0, 0
+        settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, q_max=0, tracker=kind)
+        trackers = {impl: IntervalTracker(settings, hall.bounds) for impl in IMPLEMENTATIONS}
+        previous = dict.fromkeys(IMPLEMENTATIONS)
+        times, boxes, areas, kept, differ = {i: [] for i in IMPLEMENTATIONS}, [], [], 0, 0
         for truth, scan in zip(poses, scans, strict=True):
             results, best = _step_both(trackers, previous, scan, 1.0, repeat)
             result = results["compiled"]
             if result.status == "tracking":
-                for engine in Engine:
-                    times[engine].append(best[engine])
+                for impl in IMPLEMENTATIONS:
+                    times[impl].append(best[impl])
                 boxes.append(result.paving.outer.shape[0])
                 areas.append(result.paving.area_xy())
             kept += int(result.consistent and result.paving.contains(truth[None])[0])
@@ -124,7 +126,7 @@ def _circuit_rows(hall, params, belt, rng, epochs: int, repeat: int) -> list[str
         if kept != epochs:
             rows.append(f"| FAILED: {kind} kept the truth in {kept} of {epochs} epochs |")
         if differ:
-            rows.append(f"| FAILED: {kind}: the engines' sets differ in {differ} epochs |")
+            rows.append(f"| FAILED: {kind}: the implementations' sets differ in {differ} epochs |")
     return rows
 
 
@@ -138,13 +140,10 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
     settings = spec.estimation.intervals
-    trackers = {
-        engine: IntervalTracker(dataclasses.replace(settings, engine=engine), spec.map.bounds)
-        for engine in Engine
-    }
+    trackers = {impl: IntervalTracker(settings, spec.map.bounds) for impl in IMPLEMENTATIONS}
     scans = np.arange(0, len(log.sonar_t_s), est.scan_stride(spec.sensors.sonar.rate_hz))
-    previous, last_t = dict.fromkeys(Engine), log.sonar_t_s[scans[0]]
-    times, boxes, areas, kept, differ = {e: [] for e in Engine}, [], [], 0, 0
+    previous, last_t = dict.fromkeys(IMPLEMENTATIONS), log.sonar_t_s[scans[0]]
+    times, boxes, areas, kept, differ = {i: [] for i in IMPLEMENTATIONS}, [], [], 0, 0
     for index in scans:
         scan = SonarScan(spec.map.segments, belt, log.sonar_range_m[index], spec.map.boundary)
         results, best = _step_both(
@@ -152,8 +151,8 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
         )
         result = results["compiled"]
         previous, last_t = {e: r.paving for e, r in results.items()}, log.sonar_t_s[index]
-        for engine in Engine:
-            times[engine].append(best[engine])
+        for impl in IMPLEMENTATIONS:
+            times[impl].append(best[impl])
         differ += int(not _same_sets(results))
         if result.consistent:
             boxes.append(result.paving.outer.shape[0])
@@ -161,7 +160,7 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
             kept += int(result.paving.contains(log.sonar_pose[index][None])[0])
     rows = [
         _row(
-            f"sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {est.q_max}, "
+            f"sivia tracker epoch (pipeline: hall {duration_s:g} s, q_max {settings.q_max}, "
             "guaranteed; all epochs)",
             times,
             boxes,
@@ -171,23 +170,25 @@ def _pipeline_rows(duration_s: float, repeat: int) -> list[str]:
     if kept != len(scans):
         rows.append(f"| FAILED: pipeline tracker kept the truth in {kept} of {len(scans)} epochs |")
     if differ:
-        rows.append(f"| FAILED: pipeline: the engines' sets differ in {differ} epochs |")
+        rows.append(f"| FAILED: pipeline: the implementations' sets differ in {differ} epochs |")
     return rows
 
 
-def _best_of(call, repeat: int):
-    """``(call(), best wall time s)`` over ``repeat`` identical calls (at least one)."""
+def _best_of(call, repeat: int, impl: str = "compiled"):
+    """``(call(), best wall time s)`` over ``repeat`` identical calls (at least one), run on
+    the implementation ``impl`` of the box tests."""
     best, result = np.inf, None
-    for _ in range(max(1, repeat)):
-        start = time.perf_counter()
-        result = call()
-        best = min(best, time.perf_counter() - start)
+    with _running(impl):
+        for _ in range(max(1, repeat)):
+            start = time.perf_counter()
+            result = call()
+            best = min(best, time.perf_counter() - start)
     return result, best
 
 
 def _row(label: str, times: dict, boxes: list, areas: list) -> str:
-    """A table row: per engine the median and p95 epoch ms, the median per-epoch speed-up of
-    the compiled engine, the median set size and (x, y) area."""
+    """A table row: per implementation the median and p95 epoch ms, the median per-epoch
+    speed-up of the kernels, the median set size and (x, y) area."""
     t = {e: np.array(v) * 1e3 for e, v in times.items()}
     speedup = np.median(t["numpy"] / t["compiled"])
     return (
@@ -216,14 +217,14 @@ def main(argv: list[str] | None = None) -> int:
     whole = np.array([b[0], b[1], [-np.pi, np.pi]])
 
     warm_up = _scan(hall, params, belt, np.array([3.0, 3.0, 0.0]), np.random.default_rng(0))
-    for engine in Engine:  # load (or compile) the kernel before timing; rng left untouched
-        localize(warm_up, whole, 0.5, engine=engine)
+    for impl in IMPLEMENTATIONS:  # load (or compile) the kernels before timing; rng untouched
+        _best_of(partial(localize, warm_up, whole, 0.5), 1, impl)
     rows, lost = [], 0
     for label, runs in (
         ("tracking epoch (prior +-0.5 m, +-0.2 rad)", args.epochs),
         ("global localisation (whole hall)", args.global_runs),
     ):
-        times, boxes, areas, differ = {e: [] for e in Engine}, [], [], 0
+        times, boxes, areas, differ = {i: [] for i in IMPLEMENTATIONS}, [], [], 0
         for truth in _random_poses(hall, runs, rng):
             scan = _scan(hall, params, belt, truth, rng)
             if label.startswith("tracking"):
@@ -232,11 +233,11 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 prior = whole
             pavings = {}
-            for engine in Engine:  # interleaved: both engines on each scan in turn
-                pavings[engine], best = _best_of(
-                    partial(localize, scan, prior, eps, engine=engine), args.repeat
+            for impl in IMPLEMENTATIONS:  # interleaved: both on each scan in turn
+                pavings[impl], best = _best_of(
+                    partial(localize, scan, prior, eps), args.repeat, impl
                 )
-                times[engine].append(best)
+                times[impl].append(best)
             paving = pavings["compiled"]
             differ += int(not np.array_equal(paving.outer, pavings["numpy"].outer))
             boxes.append(paving.outer.shape[0])
@@ -244,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
             lost += int(not paving.contains(truth[None])[0])
         rows.append(_row(label, times, boxes, areas))
         if differ:
-            rows.append(f"| FAILED: {label}: the engines' sets differ in {differ} runs |")
+            rows.append(f"| FAILED: {label}: the implementations' sets differ in {differ} runs |")
     rows += _circuit_rows(hall, params, belt, rng, 60, args.repeat)
     if args.pipeline_s > 0:
         rows += _pipeline_rows(args.pipeline_s, args.repeat)
@@ -257,7 +258,9 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     if lost:
-        print(f"FAILED: the truth left a set, or the engines differ ({lost})", file=sys.stderr)
+        print(
+            f"FAILED: the truth left a set, or the implementations differ ({lost})", file=sys.stderr
+        )
         return 1
     return 0
 
