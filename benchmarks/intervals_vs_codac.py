@@ -609,7 +609,7 @@ Findings (causes measured with the cross-check above and with timings of the par
 - Real belt (last table): the ray test also pays at 12.5 deg (median volume 0.90 of the sonar
   test's, smaller in 7 of 8 epochs) and more on narrower cones (0.74 at 0.1 rad, 0.37 to 0.67
   below), for about 5 ms more per epoch (7 ms against the compiled sonar test's 2 ms; the
-  numpy engine of the ray test: about 13 ms more). Hence ``intervals.localize.localize`` and
+  numpy reference of the ray test: about 13 ms more). Hence ``intervals.localize.localize`` and
   ``gomne`` apply it by default only to cones of half-aperture up to 0.1 rad
   (``ray_test=None``); on the default belt it is an opt-in (``ray_test=True``), which would
   cost the pipeline about 3 s per 600 s.
