@@ -7,8 +7,9 @@ scene's :mod:`intervals.sonar.segment_grid`, not the whole map), and runs the hi
 test, the free-space test and (optionally) the inner acceptance of the module doc of
 :mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
-sensors leave. It is the same computation as the numpy implementation there (the
-reference it is tested against, ``tests/intervals/test_sonar_kernel.py``): the same formulas,
+sensors leave. It is the same computation as the numpy implementation of
+:mod:`intervals.sonar.reference.cone` (the reference it is tested against,
+``tests/intervals/test_sonar_kernel.py``; not on the production path): the same formulas,
 evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
 into fused multiply-adds without ``fastmath``), with the same ``GUARD_M`` biases, sensor-box
 margin, ``arc_reaches`` slack and ``1e-9`` rad angle margins (passed in by the caller), the same
@@ -99,7 +100,7 @@ def _point_box_farthest(px, py, cx, cy, hx, hy):
 def _clip(ax, ay, ex, ey, planes, first):
     """Parameter range ``(t_lo, t_hi)`` of ``a + t e``, t in [0, 1], in the two half-planes
     ``nx qx + ny qy >= c`` stored as ``planes[first:first + 6] = (nx, ny, c, nx, ny, c)``;
-    empty where ``t_lo > t_hi`` (as ``intervals.sonar.geometry.clip_segment``)."""
+    empty where ``t_lo > t_hi`` (as ``intervals.sonar.reference.geometry.clip_segment``)."""
     t_lo, t_hi = 0.0, 1.0
     for h in range(first, first + 6, 3):
         nx, ny, c = planes[h], planes[h + 1], planes[h + 2]
@@ -117,7 +118,7 @@ def _clip(ax, ay, ex, ey, planes, first):
 @numba.njit(cache=True)
 def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
     """Whether the arc from ``u_a`` counter-clockwise to ``u_b`` holds the axis direction
-    ``e`` (as ``intervals.sonar.geometry.arc_reaches``, slack towards "reached")."""
+    ``e`` (as ``intervals.sonar.reference.geometry.arc_reaches``, slack towards "reached")."""
     det_a = ux_a * ey - uy_a * ex
     det_b = ex * uy_b - ey * ux_b
     if half_turn:
@@ -128,7 +129,7 @@ def _arc_reaches(ux_a, uy_a, ux_b, uy_b, ex, ey, half_turn, slack):
 @numba.njit(cache=True)
 def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
     """One wedge-edge half-plane ``(nx, ny, c)`` into ``out[at:at + 3]`` (as one turn of
-    ``intervals.sonar.geometry.wedge_constraints``)."""
+    ``intervals.sonar.reference.geometry.wedge_constraints``)."""
     nx, ny = -flip * uy, flip * ux
     spread = abs(nx) * hx + abs(ny) * hy
     out[at] = nx
@@ -152,7 +153,7 @@ def sensor_rows(
 ):
     """Sensor boxes and wedge half-planes of every sensor for one pose box ``(3, 2)`` whose
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
-    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.cone.sensor_boxes``); returns ``sure``
+    ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.reference.cone.sensor_boxes``); returns ``sure``
     (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
     theta_lo, theta_hi = box[2, 0], box[2, 1]
     width = theta_hi - theta_lo
@@ -424,7 +425,7 @@ def sensor_verdicts_into(
 
 @numba.njit(cache=True)
 def room_verdicts_into(boxes, boundary, guard_m, near_switch_m, outside, inside):
-    """The in-room test of :mod:`intervals.sonar.room` (as ``intervals.sonar.room.room_verdicts``), in
+    """The in-room test of :mod:`intervals.sonar.room` (as ``intervals.sonar.reference.room.room_verdicts``), in
     place: ``outside (N,)`` / ``inside (N,)`` bool, the (x, y) rectangle of box ``n`` lies
     entirely outside / inside the polygon ``boundary (p, 2)`` m: no edge comes within
     ``guard_m`` of it, and the ray cast from its centre towards +x crosses the boundary an even
