@@ -23,7 +23,9 @@ from intervals.sonar import cone_kernel, rays
 from intervals.sonar.cone import heading_trig, sensor_verdicts
 from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M
 from intervals.sonar.reference import cone as reference_cone
+from intervals.sonar.reference import rays as reference_rays
 from intervals.sonar.reference import reference_box_tests
+from intervals.sonar.reference import room as reference_room
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import ECHO, FREE, IGNORED, SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, TrackerSettings
@@ -177,6 +179,30 @@ def test_compiled_sensor_boxes_equal_the_numpy_ones():
     assert rows_checked == 20 * 80
 
 
+def test_compiled_room_verdicts_equal_the_numpy_reference():
+    """The in-room kernel against its reference on random star-shaped (non-convex) boundaries
+    of 5 to 30 vertices, with boxes of every size inside, outside and across the edges: the
+    same verdicts, and all three outcomes occur."""
+    rng = np.random.default_rng(34)
+    outcomes = np.zeros(3, dtype=int)  # outside, inside, neither
+    for _ in range(20):
+        count = int(rng.integers(5, 31))
+        angle = np.sort(rng.uniform(-np.pi, np.pi, count))
+        radius = rng.uniform(2.0, 6.0, count)
+        boundary = 5.0 + radius[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        centre = rng.uniform(-2.0, 12.0, (200, 2))
+        half = np.exp(rng.uniform(np.log(1e-4), np.log(3.0), (200, 2)))
+        boxes = np.zeros((200, 3, 2))
+        boxes[:, :2, 0], boxes[:, :2, 1] = centre - half, centre + half
+        boxes[:, 2] = [-0.1, 0.1]
+        outside, inside = room_verdicts(boxes, boundary)
+        expected = reference_room.room_verdicts(boxes, boundary)
+        np.testing.assert_array_equal(outside, expected[0])
+        np.testing.assert_array_equal(inside, expected[1])
+        outcomes += [outside.sum(), inside.sum(), (~outside & ~inside).sum()]
+    assert (outcomes > 100).all(), outcomes
+
+
 def test_paving_and_tracking_agree_with_the_references():
     """SIVIA, GOMNE (q_max 2, inner boxes on and off) and tracker epochs in ``hall`` give the
     same boxes on the kernels and on the numpy references (:func:`reference_box_tests`), with
@@ -217,9 +243,13 @@ def test_paving_and_tracking_agree_with_the_references():
     assert rays.piece_rejections.__module__ == "intervals.sonar.rays"
 
 
-def test_the_reference_switch_restores_the_kernels_after_an_error():
+def test_the_reference_switch_replaces_every_box_test_and_restores_the_kernels():
+    """Inside the block the pipeline looks up the three references (so the comparisons above
+    compare two implementations); after it, even when it raised, the kernels again."""
     with pytest.raises(ZeroDivisionError), reference_box_tests():
         assert localize_module.sensor_verdicts is reference_cone.sensor_verdicts
+        assert localize_module.room_verdicts is reference_room.room_verdicts
+        assert rays.piece_rejections is reference_rays.piece_rejections
         _ = 1 / 0
     assert localize_module.sensor_verdicts is sensor_verdicts
     assert localize_module.room_verdicts is room_verdicts
