@@ -31,6 +31,7 @@ from intervals.sonar import contractor
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
+from intervals.tighten import MAX_LEVELS, tighten
 
 MIN_LEVEL_BOXES = 128
 """SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
@@ -118,6 +119,18 @@ def _checked_rounds(rounds) -> int:
     return int(rounds)
 
 
+def _checked_levels(levels) -> int:
+    if not (
+        isinstance(levels, (int, np.integer))
+        and not isinstance(levels, bool)
+        and 0 <= levels <= MAX_LEVELS
+    ):
+        raise IntervalError(
+            f"tighten_levels must be an integer in [0, {MAX_LEVELS}], got {levels!r}"
+        )
+    return int(levels)
+
+
 def _initial_poses(initial) -> np.ndarray:
     boxes = as_boxes(initial, "initial pose boxes")
     if boxes.shape[1] != 3:
@@ -150,6 +163,7 @@ def _pave(
     within=None,
     contract=True,
     shave_rounds=0,
+    tighten_levels=0,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
     number of sensors rejecting each boundary box (``merged``: see below), kept from the
@@ -181,6 +195,12 @@ def _pave(
     a paving not cut short are shaved (:func:`_shaved`, ``shave_rounds`` rounds), within the
     budget's tests when there is one (fewer rounds, or none, when the tests left do not allow
     them).
+
+    With ``tighten_levels`` the boundary boxes of a paving not cut short are first refined
+    below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
+    as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
+    count of its own test; at most ``max_boxes`` boxes and the budget's tests left, when there
+    is a budget (the pass stops early otherwise), before any shaving.
     """
     stored, counts, tested = [], [], [0]
     if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
@@ -236,6 +256,21 @@ def _pave(
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
+        if tighten_levels and paving.boundary.shape[0]:
+            paving, rejects = _tightened(
+                paving,
+                rejects,
+                local,
+                q,
+                scale,
+                engine,
+                ray_test,
+                contract,
+                tighten_levels,
+                max_boxes,
+                None if max_boxes is None else TESTS_PER_BOX * max_boxes - tested[0],
+                tested,
+            )
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
@@ -279,6 +314,49 @@ def _pave(
     return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
 
 
+def _tightened(
+    paving: Subpaving,
+    rejects,
+    local: SonarScan,
+    q: int,
+    scale,
+    engine: str,
+    ray_test: bool,
+    contract: bool,
+    levels: int,
+    max_boxes,
+    max_tested,
+    tested: list,
+):
+    """The boundary boxes refined by :func:`intervals.tighten.tighten` with their counts (see
+    :func:`_pave`); ``tested[0]`` grows by the boxes tested."""
+
+    def counted(b):
+        verdicts, counts, reject = _test_and_counts(b, local, q, False, engine)
+        keep = verdicts != OUTSIDE
+        if ray_test and (idx := np.flatnonzero(keep)).size:
+            from intervals.sonar import rays  # compiled only for runs with the ray test
+
+            counts[idx] = rays.joint_rejection_counts(
+                b[idx], local, rays.DEFAULT_PIECES, other=reject[idx], engine=engine
+            )
+            keep[idx] = counts[idx] <= q
+        return keep, counts
+
+    boxes, counts, seen = tighten(
+        paving.boundary,
+        rejects,
+        counted,
+        (lambda b: contractor.contract(b, local, q)) if contract else None,
+        scale,
+        levels,
+        max_boxes=max_boxes,
+        max_tested=None if max_tested is None else max(max_tested, 0),
+    )
+    tested[0] += seen
+    return Subpaving(paving.inner, boxes, coarse=paving.coarse), counts
+
+
 def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
     """The boundary boxes narrowed by :func:`intervals.sonar.contractor.shave` (cone and room
     tests at ``q``, ``rounds`` rounds, at most ``max_boxes`` slices a call), with their counts: a
@@ -307,6 +385,7 @@ def localize(
     max_kept: int | None = None,
     contract: bool = True,
     shave_rounds: int = 0,
+    tighten_levels: int = 0,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
@@ -330,7 +409,9 @@ def localize(
     the test (the same set or a tighter one: it only removes poses with more than ``q`` wrong
     readings). ``shave_rounds``: with ``contract``, rounds of
     :func:`intervals.sonar.contractor.shave` on the boxes kept (0: none; each round tighter and
-    dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`).
+    dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`). ``tighten_levels``: bisections
+    below ``eps`` of the boxes kept, each piece tested and contracted
+    (:mod:`intervals.tighten`; 0: none; 9 halves each axis about three times), before shaving.
     """
     _checked_q(q)
     _checked_budget(max_boxes)
@@ -352,6 +433,7 @@ def localize(
         None,
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
+        _checked_levels(tighten_levels),
     )[0]
 
 
@@ -392,6 +474,7 @@ def gomne(
     within=None,
     contract: bool = True,
     shave_rounds: int = 0,
+    tighten_levels: int = 0,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -404,8 +487,9 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``
-    and ``shave_rounds``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
+    ``engine``, ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``,
+    ``shave_rounds`` and ``tighten_levels``: as in :func:`localize`.
+    ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
     2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
     component): SIVIA rejects the boxes meeting none of them without testing them, so the
     set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
@@ -433,6 +517,7 @@ def gomne(
         None if within is None or len(within) > MAX_WITHIN_REGIONS else within,
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
+        _checked_levels(tighten_levels),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
@@ -451,6 +536,7 @@ def gomne(
                 max_kept=max_kept,
                 contract=contract,
                 shave_rounds=shave_rounds,
+                tighten_levels=tighten_levels,
             )
             if not minimal.is_empty:
                 break
