@@ -35,7 +35,8 @@ default for cones this thin, ``contract=False``), and "ours + contractor" (both 
 default; every SIVIA frontier contracted by :mod:`intervals.sonar.contractor` and the boxes kept
 shaved, compared with codac's ``pave``, the contractor formulation: issue 13's target is a volume at
 most codac's at least 3x faster); with ``--tighten-levels L`` also "ours + tightened", the same
-with the kept boxes refined ``L`` bisections below ``eps`` (:mod:`intervals.tighten`). The ray test: the sonar test, then on the boxes it would keep the ray test of
+with the kept boxes refined ``L`` bisections below ``eps`` (:mod:`intervals.tighten`).
+The ray test: the sonar test, then on the boxes it would keep the ray test of
 :mod:`intervals.sonar.rays` (the heading kept as one variable, boxes cut into
 ``intervals.sonar.rays.DEFAULT_PIECES`` heading pieces, a box rejected when every piece is rejected
 by some sensor). The last table measures that combination on
