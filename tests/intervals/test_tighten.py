@@ -45,7 +45,7 @@ def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
     which is smaller."""
     rng = np.random.default_rng(int(gamma * 1e6) + 13)
     kept, ratios = 0, []
-    for case in range(18):
+    for case in range(9):  # every pair of q in 0..2 and levels 3, 6, 9
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
         q = case % 3
         scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
@@ -56,15 +56,15 @@ def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
         plain = localize(scan, prior, 0.05, q=q)
         if plain.is_empty:
             continue
-        levels = (3, 6, 9)[case % 3]
+        levels = (3, 6, 9)[case // 3]
         tight = localize(scan, prior, 0.05, q=q, tighten_levels=levels)
-        poses = _poses_in(plain.outer, truth, rng, 3000)
+        poses = _poses_in(plain.outer, truth, rng, 2000)
         fits = _wrong_readings(poses, scan, params) <= q
         inside = contains_points(tight.outer, poses).any(axis=0)
         assert not np.any(fits & ~inside), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
         ratios.append(tight.volume() / plain.volume())
-    assert kept > 2000  # the check saw many consistent poses
+    assert kept > 500  # the check saw many consistent poses
     assert max(ratios) <= 1.0 and np.median(ratios) < 0.5  # it tightens, never widens
 
 
@@ -73,7 +73,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
     """GOMNE with tightening: the guaranteed set holds every consistent pose at q_max, and its
     minimal set (read off the pieces' counts) every pose with at most q wrong readings."""
     rng = np.random.default_rng(29)
-    for case in range(10):
+    for case in range(6):
         scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
         scan = _with_outliers(scan, rng, case % 2)
         prior = np.stack([truth - [0.3, 0.3, 0.15], truth + [0.3, 0.3, 0.15]], axis=-1)
@@ -104,7 +104,7 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     cells = np.array([[x, y] for x in edges for y in edges])
     keep, counts = _disk(cells)
     cells, counts = cells[keep], counts[keep]
-    points = np.random.default_rng(2).uniform(-1, 1, (20_000, 2))
+    points = np.random.default_rng(2).uniform(-1, 1, (3000, 2))
     points = points[np.hypot(*points.T) <= 1]
     out, out_counts, tested = tighten(cells, counts, _disk, None, None, 6)
     assert contains_points(out, points).any(axis=0).all()
