@@ -154,10 +154,10 @@ class TrackerSettings:
     tighten_levels: int = bounded(0, minimum=0, maximum=MAX_LEVELS, integer=True)
     """Bisections below ``eps_m`` of the boxes kept, each piece tested and (with ``contractor``)
     contracted, before any shaving (:mod:`intervals.tighten`): 0 (default) none; 9 (each axis
-    halved about three times) with ``shave_rounds = 1`` brings the outer volume from about 25
-    to about 3 times the consistent poses' volume on ``hall``, ``office`` and ``apartment``
-    (``benchmarks/tightness.py``), for about 10 to 20 ms more an epoch and a set of a few
-    hundred boxes instead of a few."""
+    halved about three times) brings the outer volume from 16 to 55 times the consistent poses'
+    volume to 2.0 to 2.6 times (median over the tracking epochs of the built-in plans,
+    ``benchmarks/tightness.py``), for an epoch 3 to 6 times as dear and a set of tens to
+    hundreds of boxes instead of a few."""
 
     def __post_init__(self) -> None:
         validate_fields(self, IntervalError)
