@@ -199,8 +199,8 @@ def _pave(
     With ``tighten_levels`` the boundary boxes of a paving not cut short are first refined
     below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
     as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
-    count of its own test; at most ``max_boxes`` boxes and the budget's tests left, when there
-    is a budget (the pass stops early otherwise), before any shaving.
+    count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
+    largest boxes refined first, the rest kept as they are), before any shaving.
     """
     stored, counts, tested = [], [], [0]
     if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE

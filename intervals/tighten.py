@@ -22,9 +22,11 @@ and a contracted child keeps every such pose of its own. The count returned with
 the test's count on that box (a number of sensors each rejecting every pose of it), so a
 caller's ``count <= q`` subsets (GOMNE's ``S_q``) stay sound.
 
-Cost. At most ``2 ** splits`` children a box per test call; the pass stops before a call
-that would make more than ``max_boxes`` children or take the tests past ``max_tested``, and
-returns the set as it then is (sound, only coarser: refining never has to finish).
+Cost. At most ``2 ** splits`` children a box per test call. Under the caps a call refines
+only the largest boxes (by volume) for which there is room: the set after it holds at most
+``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they are,
+and when there is room for none the pass stops (sound either way, only coarser: refining
+never has to finish).
 """
 
 from __future__ import annotations
@@ -68,9 +70,9 @@ def tighten(
     (N,)``) refined ``levels`` bisections deep (module doc); ``tested``: the boxes the test saw.
 
     ``scale (d,)``: per-axis scale of the widths for the choice of the bisected axis (None:
-    unscaled). ``max_boxes``: the most children one call may make (None: no limit);
-    ``max_tested``: the most boxes the test may see in all (None: no limit). A call that would
-    exceed either is not made: the set is returned as it is.
+    unscaled). ``max_boxes``: the most boxes the set may hold after a call (None: no limit; a
+    set already larger is returned as it is); ``max_tested``: the most boxes the test may see
+    in all (None: no limit). Under these a call refines the largest boxes there is room for.
     """
     if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= MAX_LEVELS):
         raise IntervalError(
@@ -85,16 +87,21 @@ def tighten(
     done, tested = 0, 0
     while done < levels and boxes.shape[0]:
         cuts = min(splits, levels - done)
-        n = boxes.shape[0] << cuts
-        if (max_boxes is not None and n > max_boxes) or (
-            max_tested is not None and tested + n > max_tested
-        ):
+        n = boxes.shape[0]
+        fit = n  # the boxes this call refines: all, or the largest the caps leave room for
+        if max_boxes is not None:  # the set after the call: at most max_boxes boxes
+            fit = min(fit, (max_boxes - n) // ((1 << cuts) - 1))
+        if max_tested is not None:
+            fit = min(fit, (max_tested - tested) >> cuts)
+        if fit <= 0:
             break
-        children = boxes
+        order = np.argsort(-np.prod(boxes[:, :, 1] - boxes[:, :, 0], axis=1), kind="stable")
+        chosen, rest = (slice(None), order[:0]) if fit == n else (order[:fit], order[fit:])
+        children = boxes[chosen]
         for _ in range(cuts):
             children = np.concatenate(bisect(children, scale))
         done += cuts
-        tested += n
+        tested += children.shape[0]
         keep, child_counts = test(children)
         keep = np.asarray(keep, dtype=bool)
         children, child_counts = children[keep], np.asarray(child_counts)[keep]
@@ -106,5 +113,6 @@ def tighten(
             )
             full = np.all(c[..., 0] <= c[..., 1], axis=1)  # NaN compares false: emptied
             children, child_counts = c[full], child_counts[full]
-        boxes, counts = children, child_counts
+        boxes = np.concatenate([children, boxes[rest]])
+        counts = np.concatenate([child_counts, counts[rest]])
     return boxes, counts, tested

@@ -116,6 +116,11 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     part, _, seen = tighten(cells, counts, _disk, None, None, 6, max_tested=cells.shape[0] * 8)
     assert seen == cells.shape[0] * 8 and contains_points(part, points).any(axis=0).all()
     assert volume(out) <= volume(part) <= volume(cells)
+    room = 3 * cells.shape[0]  # room for a third of the boxes' children: the largest refined
+    some, some_counts, _ = tighten(cells, counts, _disk, None, None, 6, max_boxes=room)
+    assert some.shape[0] <= room and contains_points(some, points).any(axis=0).all()
+    assert volume(out) < volume(some) < volume(cells)
+    assert np.array_equal(some_counts, _disk(some)[1])
 
     # a contractor that empties a row drops it; one that widens a row is clipped to it
     def widening(b):
