@@ -166,7 +166,7 @@ def test_tracker_with_tightening_keeps_the_truth_in_smaller_sets():
             assert result.consistent and result.paving.contains(truth[None])[0]
             previous[key] = result.paving
     assert previous["tight"].volume() < 0.5 * previous["plain"].volume()
-    # under a budget smaller than that set the report stays within it, fine (not coarse), sound
+    # under the smallest budget (8 boxes, binding here) the report stays within it, fine, sound
     capped = IntervalTracker(
         TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=1.0, tighten_levels=9, max_boxes=8),
         bounds,
