@@ -155,8 +155,9 @@ class TrackerSettings:
     """Bisections below ``eps_m`` of the boxes kept, each piece tested and (with ``contractor``)
     contracted, before any shaving (:mod:`intervals.tighten`): 0 (default) none; 9 (each axis
     halved about three times) brings the outer volume from 16 to 55 times the consistent poses'
-    volume to 2.0 to 2.6 times (median over the tracking epochs of the built-in plans,
-    ``benchmarks/tightness.py``), for an epoch 3 to 6 times as dear and a set of tens to
+    volume to 2.0 to 2.6 times (median over the tracking epochs of seven built-in plans;
+    ``office_floor`` 69 to 4.8, its sets too many boxes for the budget at 9 levels;
+    ``benchmarks/tightness.py``), for an epoch 2.6 to 6.8 times as dear and a set of tens to
     hundreds of boxes instead of a few."""
 
     def __post_init__(self) -> None:
