@@ -4,9 +4,10 @@ consistent poses).
 Why. SIVIA stops bisecting at ``eps``, and the consistent poses of a tracking epoch are a thin
 slanted sheet in ``(x, y, theta)``: they fill about a quarter of their own bounding box, so
 even boxes contracted exactly to that hull, at ``eps``, hold about four times their volume
-(BENCHMARKS.md, "Tightness"). Only boxes finer than ``eps`` can follow the sheet. The final
-set holds few boxes (a few to a few tens in tracking), so refining only these costs little
-next to paving the whole prediction at the finer precision.
+(BENCHMARKS.md, "Tightness"). Only boxes finer than ``eps`` can follow the sheet. Below
+``eps`` this does what a SIVIA at a finer precision would do to the boxes it kept, but only to
+the reported set (a few to a few tens of boxes in tracking): the rest of the pipeline (global
+searches, predictions, the budget's figures) stays at ``eps``.
 
 What. :func:`tighten` takes the boxes a paving kept and, ``levels`` times in all,
 ``splits`` at a time, bisects every box (:func:`intervals.boxes.bisect`: the widest scaled
