@@ -236,6 +236,14 @@ def _pave(
             verdicts[meets], rejects[meets] = sonar_test(b[meets])
         return verdicts, rejects
 
+    def counted(b):  # the test of the tightening: (kept, counts) as SIVIA's stored boxes
+        verdicts, rejects, reject = _test_and_counts(b, local, q, False, engine)
+        keep = verdicts != OUTSIDE
+        if ray_test and (idx := np.flatnonzero(keep)).size:
+            rejects[idx] = recount(b[idx], reject[idx])
+            keep[idx] = rejects[idx] <= q
+        return keep, rejects
+
     paving = sivia(
         test,
         boxes,
@@ -256,21 +264,20 @@ def _pave(
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
-        if tighten_levels and paving.boundary.shape[0]:
-            paving, rejects = _tightened(
-                paving,
+        if tighten_levels and paving.boundary.shape[0]:  # within the budget's tests left
+            left = None if max_boxes is None else max(TESTS_PER_BOX * max_boxes - tested[0], 0)
+            boundary, rejects, seen = tighten(
+                paving.boundary,
                 rejects,
-                local,
-                q,
+                counted,
+                (lambda b: contractor.contract(b, local, q)) if contract else None,
                 scale,
-                engine,
-                ray_test,
-                contract,
                 tighten_levels,
-                max_boxes,
-                None if max_boxes is None else TESTS_PER_BOX * max_boxes - tested[0],
-                tested,
+                max_boxes=max_boxes,
+                max_tested=left,
             )
+            tested[0] += seen
+            paving = Subpaving(paving.inner, boundary, coarse=paving.coarse)
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
@@ -312,49 +319,6 @@ def _pave(
         boundary, rejects = retest(cells)
         inner_boxes, merged = inner_boxes[:0], True
     return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
-
-
-def _tightened(
-    paving: Subpaving,
-    rejects,
-    local: SonarScan,
-    q: int,
-    scale,
-    engine: str,
-    ray_test: bool,
-    contract: bool,
-    levels: int,
-    max_boxes,
-    max_tested,
-    tested: list,
-):
-    """The boundary boxes refined by :func:`intervals.tighten.tighten` with their counts (see
-    :func:`_pave`); ``tested[0]`` grows by the boxes tested."""
-
-    def counted(b):
-        verdicts, counts, reject = _test_and_counts(b, local, q, False, engine)
-        keep = verdicts != OUTSIDE
-        if ray_test and (idx := np.flatnonzero(keep)).size:
-            from intervals.sonar import rays  # compiled only for runs with the ray test
-
-            counts[idx] = rays.joint_rejection_counts(
-                b[idx], local, rays.DEFAULT_PIECES, other=reject[idx], engine=engine
-            )
-            keep[idx] = counts[idx] <= q
-        return keep, counts
-
-    boxes, counts, seen = tighten(
-        paving.boundary,
-        rejects,
-        counted,
-        (lambda b: contractor.contract(b, local, q)) if contract else None,
-        scale,
-        levels,
-        max_boxes=max_boxes,
-        max_tested=None if max_tested is None else max(max_tested, 0),
-    )
-    tested[0] += seen
-    return Subpaving(paving.inner, boxes, coarse=paving.coarse), counts
 
 
 def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, engine: str, rounds, max_boxes):
