@@ -1,7 +1,8 @@
 """Our SIVIA against codac 2's ``sivia`` (and ``pave`` with a separator) on the same set inversions.
 
     python benchmarks/intervals_vs_codac.py [--landmark-runs 5] [--tracking-runs 8] [--global-runs 0]
-                                            [--belt-runs 8] [--repeats 3] [--seed 0] [--write]
+                                            [--belt-runs 8] [--repeats 3] [--seed 0]
+                                            [--tighten-levels 0] [--write]
 
 The default run takes about a minute; ``--global-runs 1`` adds the global case, where codac's
 ``sivia`` alone needs about three minutes.
@@ -33,7 +34,9 @@ Ours in (b) three times, all ``intervals.localize.localize``: with the sonar box
 default for cones this thin, ``contract=False``), and "ours + contractor" (both on: ``localize``'s
 default; every SIVIA frontier contracted by :mod:`intervals.sonar.contractor` and the boxes kept
 shaved, compared with codac's ``pave``, the contractor formulation: issue 13's target is a volume at
-most codac's at least 3x faster). The ray test: the sonar test, then on the boxes it would keep the ray test of
+most codac's at least 3x faster); with ``--tighten-levels L`` also "ours + tightened", the same
+with the kept boxes refined ``L`` bisections below ``eps`` (:mod:`intervals.tighten`).
+The ray test: the sonar test, then on the boxes it would keep the ray test of
 :mod:`intervals.sonar.rays` (the heading kept as one variable, boxes cut into
 ``intervals.sonar.rays.DEFAULT_PIECES`` heading pieces, a box rejected when every piece is rejected
 by some sensor). The last table measures that combination on
@@ -323,6 +326,7 @@ def run_case_b(
     repeats: int,
     rng: np.random.Generator,
     f: codac.AnalyticFunction,
+    tighten_levels: int = 0,
 ) -> list[dict]:
     hall = builtin_map("hall")
     params = ray_params()
@@ -383,6 +387,21 @@ def run_case_b(
                 repeats,
             ),
         }
+        if tighten_levels:
+            result["ours + tightened"] = ours(
+                partial(
+                    localize,
+                    scan,
+                    prior,
+                    eps,
+                    heading_scale_m_per_rad=1.0,
+                    splits_per_level=SPLITS_PER_LEVEL,
+                    ray_test=True,
+                    contract=True,
+                    tighten_levels=tighten_levels,
+                ),
+                repeats,
+            )
         result["cross"] = cross_check(
             result["ours"], result["codac sivia"], f, y, scan.restricted_to(prior)
         )
@@ -517,8 +536,11 @@ def summarise(label: str, results: list[dict]) -> tuple[list[str], bool]:
         ]
     else:
         row += ["-"] * 5
-    if "ours + contractor" in results[0]:
-        rows = [r["ours + contractor"] for r in results]
+    for solver in ("ours + contractor", "ours + tightened"):
+        if solver not in results[0]:
+            row += ["-"] * 6
+            continue
+        rows = [r[solver] for r in results]
         vs_sivia = np.median(
             [o.volume / r["codac sivia"].volume for o, r in zip(rows, results, strict=True)]
         )
@@ -529,19 +551,24 @@ def summarise(label: str, results: list[dict]) -> tuple[list[str], bool]:
             [r["codac pave"].seconds / o.seconds for o, r in zip(rows, results, strict=True)]
         )
         row += [
-            f"{med('ours + contractor', 'seconds') * 1e3:.1f}",
+            f"{med(solver, 'seconds') * 1e3:.1f}",
             f"{vs_sivia:.2f}",
             f"{vs_pave:.2f}",
             f"{faster:.0f}x",
-            f"{med('ours + contractor', 'boxes'):.0f}",
+            f"{med(solver, 'boxes'):.0f}",
             "met" if vs_pave <= 1.0 and faster >= 3.0 else "MISSED",
         ]
-    else:
-        row += ["-"] * 6
     return row, kept
 
 
-SOLVERS = ("ours", "codac sivia", "codac pave", "ours + ray test", "ours + contractor")
+SOLVERS = (
+    "ours",
+    "codac sivia",
+    "codac pave",
+    "ours + ray test",
+    "ours + contractor",
+    "ours + tightened",
+)
 HEADER = [
     "case",
     "runs",
@@ -567,6 +594,12 @@ HEADER = [
     "time ratio codac pave / it",
     "its boxes",
     "its target (issue 13: volume <= codac pave's, >= 3x faster)",
+    "ours + tightened (intervals.tighten, --tighten-levels, on the contractor's set) ms",
+    "its volume ratio / codac sivia",
+    "its volume ratio / codac pave",
+    "time ratio codac pave / it",
+    "its boxes",
+    "its target (issue 13)",
 ]
 CROSS_HEADER = [
     "case",
@@ -630,6 +663,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--belt-runs", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--tighten-levels",
+        type=int,
+        default=0,
+        help="also run ours + contractor with the kept boxes tightened this many levels (0: not)",
+    )
     parser.add_argument("--write", action="store_true", help="update this section of BENCHMARKS.md")
     args = parser.parse_args(argv)
     if (
@@ -650,13 +689,27 @@ def main(argv: list[str] | None = None) -> int:
         (
             f"(b) hall rays, tracking +-0.5 m +-0.2 rad, eps {TRACKING_EPS:g}",
             lambda: run_case_b(
-                "tracking", args.tracking_runs, TRACKING_EPS, args.repeats, rng, f_rays
+                "tracking",
+                args.tracking_runs,
+                TRACKING_EPS,
+                args.repeats,
+                rng,
+                f_rays,
+                args.tighten_levels,
             ),
             args.tracking_runs,
         ),
         (
             f"(b) hall rays, global, eps {GLOBAL_EPS:g}",
-            lambda: run_case_b("global", args.global_runs, GLOBAL_EPS, args.repeats, rng, f_rays),
+            lambda: run_case_b(
+                "global",
+                args.global_runs,
+                GLOBAL_EPS,
+                args.repeats,
+                rng,
+                f_rays,
+                args.tighten_levels,
+            ),
             args.global_runs,
         ),
     ]
@@ -702,6 +755,7 @@ def main(argv: list[str] | None = None) -> int:
             f"python benchmarks/intervals_vs_codac.py --landmark-runs {args.landmark_runs} --tracking-runs "
             f"{args.tracking_runs} --global-runs {args.global_runs} --belt-runs {args.belt_runs} "
             f"--repeats {args.repeats} --seed {args.seed}"
+            + (f" --tighten-levels {args.tighten_levels}" if args.tighten_levels else "")
         )
         write_section(
             SECTION,

@@ -1,11 +1,14 @@
 """Benchmark: how tight the interval sets are, with and without the sonar contractor (issue 13).
 
-    python benchmarks/tightness.py [PLAN ...] [--duration S] [--samples N] [--seed S] [--write]
+    python benchmarks/tightness.py [PLAN ...] [--duration S] [--samples N] [--seed S]
+                                   [--tighten-levels L] [--shave-rounds R] [--write]
 
 For each built-in plan (default: all), the scenario is simulated for ``--duration`` seconds
 (default 30) and the interval tracker steps through its scans at ``eps_m = 0.05`` with the
 scenario's other ``[estimation]`` settings, twice, interleaved scan by scan: with the contractor
-(:mod:`intervals.sonar.contractor`, the default) and without it. For each tracking epoch the
+(:mod:`intervals.sonar.contractor`, the default) and without it; with ``--tighten-levels L``
+(L > 0) a third time, the contractor on and the kept boxes tightened ``L`` levels below eps
+(:mod:`intervals.tighten`) then shaved ``--shave-rounds`` rounds (default 1). For each tracking epoch the
 outer set's volume (x, y, heading; m² rad) is compared with the volume of the consistent poses
 in it, estimated by sampling: ``--samples`` poses drawn uniformly in the outer boxes (a box
 chosen with probability proportional to its volume), each judged by the simulator's own sonar
@@ -70,17 +73,26 @@ def consistent_fraction(boxes, readings, spec, q, rng, samples) -> float:
     return float(np.mean(ok))
 
 
-def plan_rows(name: str, duration_s: float, samples: int, seed: int) -> list[list[str]]:
-    """Two table rows for one plan: with and without the contractor."""
+def plan_rows(
+    name: str, duration_s: float, samples: int, seed: int, levels: int = 0, rounds: int = 1
+) -> list[list[str]]:
+    """Table rows for one plan: with and without the contractor (and tightened, ``levels >
+    0``)."""
     spec = load_scenario(name).with_run(duration_s=duration_s)
     spec = spec.with_estimation(eps_m=EPS_M)
     log = simulate_spec(spec)
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    variants = {"on": True, "off": False}
+    variants = {"on": {"contractor": True}, "off": {"contractor": False}}
+    if levels:
+        variants[f"on, tighten {levels}, shave {rounds}"] = {
+            "contractor": True,
+            "tighten_levels": levels,
+            "shave_rounds": rounds,
+        }
     trackers = {
-        key: IntervalTracker(dataclasses.replace(est.intervals, contractor=on), spec.map.bounds)
-        for key, on in variants.items()
+        key: IntervalTracker(dataclasses.replace(est.intervals, **change), spec.map.bounds)
+        for key, change in variants.items()
     }
     scans = np.arange(0, len(log.sonar_t_s), est.scan_stride(spec.sensors.sonar.rate_hz))
     previous = dict.fromkeys(variants)
@@ -146,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--samples", type=int, default=4000, help="poses sampled per epoch")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sampling")
+    parser.add_argument("--tighten-levels", type=int, default=0, help="also run tightened (0: not)")
+    parser.add_argument("--shave-rounds", type=int, default=1, help="shaving of that run")
     parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
     args = parser.parse_args(argv)
     plans = args.plans or list(builtin_names())
@@ -163,14 +177,26 @@ def main(argv: list[str] | None = None) -> int:
     before = machine_line()
     rows = []
     for name in plans:
-        rows += plan_rows(name, args.duration, args.samples, args.seed)
-        print(markdown_table(header, rows[-2:]).split("\n", 2)[2], flush=True)
+        new = plan_rows(
+            name, args.duration, args.samples, args.seed, args.tighten_levels, args.shave_rounds
+        )
+        rows += new
+        print(markdown_table(header, new).split("\n", 2)[2], flush=True)
     command = "python benchmarks/tightness.py" + (" " + " ".join(args.plans) if args.plans else "")
     command += f" --duration {args.duration:g} --samples {args.samples} --seed {args.seed}"
+    if args.tighten_levels:
+        command += f" --tighten-levels {args.tighten_levels} --shave-rounds {args.shave_rounds}"
     body = (
         f"`{command}`: per built-in plan, {args.duration:g} s simulated, eps_m = {EPS_M}, the "
         "scenario's other settings; the tracker with the sonar contractor (`on`, the default) "
-        "and without (`off`), interleaved scan by scan. Ratio: outer volume over the volume of "
+        "and without (`off`)"
+        + (
+            f", and with it and the kept boxes tightened {args.tighten_levels} levels below eps "
+            f"then shaved {args.shave_rounds} round(s)"
+            if args.tighten_levels
+            else ""
+        )
+        + ", interleaved scan by scan. Ratio: outer volume over the volume of "
         f"the consistent poses in it, per tracking epoch, from {args.samples} poses sampled "
         "uniformly in the outer boxes and judged by the simulator's own cone model and error "
         "bounds (see the script's docstring); target <= 3. Pooled: all outer volume over all "

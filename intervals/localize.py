@@ -31,6 +31,7 @@ from intervals.sonar import contractor
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
+from intervals.tighten import MAX_LEVELS, tighten
 
 MIN_LEVEL_BOXES = 128
 """SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
@@ -116,6 +117,18 @@ def _checked_rounds(rounds) -> int:
     return int(rounds)
 
 
+def _checked_levels(levels) -> int:
+    if not (
+        isinstance(levels, (int, np.integer))
+        and not isinstance(levels, bool)
+        and 0 <= levels <= MAX_LEVELS
+    ):
+        raise IntervalError(
+            f"tighten_levels must be an integer in [0, {MAX_LEVELS}], got {levels!r}"
+        )
+    return int(levels)
+
+
 def _initial_poses(initial) -> np.ndarray:
     boxes = as_boxes(initial, "initial pose boxes")
     if boxes.shape[1] != 3:
@@ -147,6 +160,7 @@ def _pave(
     within=None,
     contract=True,
     shave_rounds=0,
+    tighten_levels=0,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
     number of sensors rejecting each boundary box (``merged``: see below), kept from the
@@ -178,6 +192,12 @@ def _pave(
     a paving not cut short are shaved (:func:`_shaved`, ``shave_rounds`` rounds), within the
     budget's tests when there is one (fewer rounds, or none, when the tests left do not allow
     them).
+
+    With ``tighten_levels`` the boundary boxes of a paving not cut short are first refined
+    below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
+    as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
+    count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
+    largest boxes refined first, the rest kept as they are), before any shaving.
     """
     stored, counts, tested = [], [], [0]
     if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
@@ -211,6 +231,14 @@ def _pave(
             verdicts[meets], rejects[meets] = sonar_test(b[meets])
         return verdicts, rejects
 
+    def counted(b):  # the test of the tightening: (kept, counts) as SIVIA's stored boxes
+        verdicts, rejects, reject = _test_and_counts(b, local, q, False)
+        keep = verdicts != OUTSIDE
+        if ray_test and (idx := np.flatnonzero(keep)).size:
+            rejects[idx] = recount(b[idx], reject[idx])
+            keep[idx] = rejects[idx] <= q
+        return keep, rejects
+
     paving = sivia(
         test,
         boxes,
@@ -231,6 +259,20 @@ def _pave(
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
+        if tighten_levels and paving.boundary.shape[0]:  # within the budget's tests left
+            left = None if max_boxes is None else max(TESTS_PER_BOX * max_boxes - tested[0], 0)
+            boundary, rejects, seen = tighten(
+                paving.boundary,
+                rejects,
+                counted,
+                (lambda b: contractor.contract(b, local, q)) if contract else None,
+                scale,
+                tighten_levels,
+                max_boxes=max_boxes,
+                max_tested=left,
+            )
+            tested[0] += seen
+            paving = Subpaving(paving.inner, boundary, coarse=paving.coarse)
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
@@ -301,6 +343,7 @@ def localize(
     max_kept: int | None = None,
     contract: bool = True,
     shave_rounds: int = 0,
+    tighten_levels: int = 0,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
@@ -323,7 +366,9 @@ def localize(
     the test (the same set or a tighter one: it only removes poses with more than ``q`` wrong
     readings). ``shave_rounds``: with ``contract``, rounds of
     :func:`intervals.sonar.contractor.shave` on the boxes kept (0: none; each round tighter and
-    dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`).
+    dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`). ``tighten_levels``: bisections
+    below ``eps`` of the boxes kept, each piece tested and contracted
+    (:mod:`intervals.tighten`; 0: none; 9 halves each axis about three times), before shaving.
     """
     _checked_q(q)
     _checked_budget(max_boxes)
@@ -344,6 +389,7 @@ def localize(
         None,
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
+        _checked_levels(tighten_levels),
     )[0]
 
 
@@ -383,6 +429,7 @@ def gomne(
     within=None,
     contract: bool = True,
     shave_rounds: int = 0,
+    tighten_levels: int = 0,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -395,8 +442,9 @@ def gomne(
     readings are outliers. GOMNE's own set ``S_q`` (``guaranteed=False``) is smaller but can
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
-    ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``
-    and ``shave_rounds``: as in :func:`localize`. ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
+    ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``,
+    ``shave_rounds`` and ``tighten_levels``: as in :func:`localize`.
+    ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
     2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
     component): SIVIA rejects the boxes meeting none of them without testing them, so the
     set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
@@ -423,6 +471,7 @@ def gomne(
         None if within is None or len(within) > MAX_WITHIN_REGIONS else within,
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
+        _checked_levels(tighten_levels),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
@@ -440,6 +489,7 @@ def gomne(
                 max_kept=max_kept,
                 contract=contract,
                 shave_rounds=shave_rounds,
+                tighten_levels=tighten_levels,
             )
             if not minimal.is_empty:
                 break

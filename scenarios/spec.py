@@ -155,6 +155,7 @@ TRACKER_KEYS = (
     "max_boxes",
     "contractor",
     "shave_rounds",
+    "tighten_levels",
 )
 
 

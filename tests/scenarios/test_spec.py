@@ -265,6 +265,11 @@ BAD = {
         "estimation.shave_rounds",
         "<= 8",
     ),
+    "estimation tighten levels": (
+        "[estimation]\ntighten_levels = 13\n",
+        "estimation.tighten_levels",
+        "<= 12",
+    ),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -351,6 +356,9 @@ def test_estimation_defaults_and_values():
     )
     assert spec.estimation.intervals.shave_rounds == 0  # off by default
     assert parse(BASE + "[estimation]\nshave_rounds = 2\n").estimation.intervals.shave_rounds == 2
+    assert spec.estimation.intervals.tighten_levels == 0  # off by default
+    tightened = parse(BASE + "[estimation]\ntighten_levels = 9\n").estimation.intervals
+    assert tightened.tighten_levels == 9
     assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
 

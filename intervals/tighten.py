@@ -1,0 +1,119 @@
+r"""Tightening of a final set below the paving precision (issue 13: outer sets close to the
+consistent poses).
+
+Why. SIVIA stops bisecting at ``eps``, and the consistent poses of a tracking epoch are a thin
+slanted sheet in ``(x, y, theta)``: they fill about a quarter of their own bounding box, so
+even boxes contracted exactly to that hull, at ``eps``, hold about four times their volume
+(BENCHMARKS.md, "Tightness"). Only boxes finer than ``eps`` can follow the sheet. Below
+``eps`` this does what a SIVIA at a finer precision would do to the boxes it kept, but only to
+the reported set (a few to a few tens of boxes in tracking): the rest of the pipeline (global
+searches, predictions, the budget's figures) stays at ``eps``.
+
+What. :func:`tighten` takes the boxes a paving kept and, ``levels`` times in all,
+``splits`` at a time, bisects every box (:func:`intervals.boxes.bisect`: the widest scaled
+axis; the two halves share the cut value, so they cover the parent), tests the children with
+a sound counted test and drops those it rejects, then contracts the survivors with a sound
+contractor and drops those it empties. Testing first and contracting only the survivors costs
+about a third less than the other order (most children are rejected), for the same volume
+(measured on ``hall`` and ``office`` tracking epochs, 9 levels).
+
+Soundness. A child is dropped only when the test proves that no pose of it is in the set, or
+the contractor empties it (no such pose); every other pose of a parent lies in a kept child,
+and a contracted child keeps every such pose of its own. The count returned with each box is
+the test's count on that box (a number of sensors each rejecting every pose of it), so a
+caller's ``count <= q`` subsets (GOMNE's ``S_q``) stay sound.
+
+Cost. At most ``2 ** splits`` children a box per test call. Under the caps a call refines
+only the largest boxes (by volume) for which there is room: the set after it holds at most
+``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they are,
+and when there is room for none the pass stops (sound either way, only coarser: refining
+never has to finish).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from intervals.boxes import bisect
+from intervals.errors import IntervalError
+
+CountedTest = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``test(boxes (N, d, 2)) -> (keep (N,) bool, counts (N,) int)``: ``keep`` False only when
+no point of the box is in the set; ``counts`` per box (e.g. the sensors rejecting it)."""
+
+Contractor = Callable[[np.ndarray], np.ndarray]
+"""``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row inside its input row (clipped here)
+holding every point of it in the set; a row with none is NaN."""
+
+MAX_LEVELS = 12
+"""The most bisections a box may get (each of the three pose axes halved four times)."""
+
+SPLITS_PER_CALL = 3
+"""Bisections between two test calls: one per pose axis, about, so each call sees up to 8
+children per box (fewer, larger calls: measured on ``hall`` tracking epochs, 9 levels one at a
+time cost about 1.8 times 3 at a time, for the same volume)."""
+
+
+def tighten(
+    boxes: np.ndarray,
+    counts: np.ndarray,
+    test: CountedTest,
+    contract: Contractor | None,
+    scale: np.ndarray | None,
+    levels: int,
+    splits: int = SPLITS_PER_CALL,
+    max_boxes: int | None = None,
+    max_tested: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """``(boxes (K, d, 2), counts (K,), tested)``: ``boxes (N, d, 2)`` (with their ``counts
+    (N,)``) refined ``levels`` bisections deep (module doc); ``tested``: the boxes the test saw.
+
+    ``scale (d,)``: per-axis scale of the widths for the choice of the bisected axis (None:
+    unscaled). ``max_boxes``: the most boxes the set may hold after a call (None: no limit; a
+    set already larger is returned as it is); ``max_tested``: the most boxes the test may see
+    in all (None: no limit). Under these a call refines the largest boxes there is room for.
+    """
+    if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= MAX_LEVELS):
+        raise IntervalError(
+            f"tighten: levels must be an integer in [0, {MAX_LEVELS}], got {levels!r}"
+        )
+    if not (isinstance(splits, (int, np.integer)) and splits >= 1):
+        raise IntervalError(f"tighten: splits must be an integer >= 1, got {splits!r}")
+    boxes = np.asarray(boxes, dtype=np.float64)
+    counts = np.asarray(counts)
+    if counts.shape != boxes.shape[:1]:
+        raise IntervalError(f"tighten: {boxes.shape[0]} boxes but {counts.shape} counts")
+    done, tested = 0, 0
+    while done < levels and boxes.shape[0]:
+        cuts = min(splits, levels - done)
+        n = boxes.shape[0]
+        fit = n  # the boxes this call refines: all, or the largest the caps leave room for
+        if max_boxes is not None:  # the set after the call: at most max_boxes boxes
+            fit = min(fit, (max_boxes - n) // ((1 << cuts) - 1))
+        if max_tested is not None:
+            fit = min(fit, (max_tested - tested) >> cuts)
+        if fit <= 0:
+            break
+        order = np.argsort(-np.prod(boxes[:, :, 1] - boxes[:, :, 0], axis=1), kind="stable")
+        chosen, rest = (slice(None), order[:0]) if fit == n else (order[:fit], order[fit:])
+        children = boxes[chosen]
+        for _ in range(cuts):
+            children = np.concatenate(bisect(children, scale))
+        done += cuts
+        tested += children.shape[0]
+        keep, child_counts = test(children)
+        keep = np.asarray(keep, dtype=bool)
+        children, child_counts = children[keep], np.asarray(child_counts)[keep]
+        if contract is not None and children.shape[0]:
+            c = np.asarray(contract(children), dtype=np.float64)
+            c = np.stack(
+                [np.maximum(c[..., 0], children[..., 0]), np.minimum(c[..., 1], children[..., 1])],
+                axis=-1,
+            )
+            full = np.all(c[..., 0] <= c[..., 1], axis=1)  # NaN compares false: emptied
+            children, child_counts = c[full], child_counts[full]
+        boxes = np.concatenate([children, boxes[rest]])
+        counts = np.concatenate([child_counts, counts[rest]])
+    return boxes, counts, tested

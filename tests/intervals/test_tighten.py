@@ -1,0 +1,177 @@
+"""The tightening of kept boxes below eps (intervals/tighten.py) against brute force.
+
+Soundness is checked as in ``tests/intervals/test_contractor.py``: with the simulator's own
+cone model and the readings' error bounds, independently of the interval code, every sampled
+pose that explains all but at most ``q`` readings (no-echo readings counted where they prove
+free space, poses outside the room explaining none) must lie in the tightened set. The poses
+are sampled in the untightened set's boxes, where the consistent poses are, and near the
+truth.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from intervals.boxes import bisect, contains_points, volume
+from intervals.errors import IntervalError
+from intervals.localize import gomne, localize
+from intervals.tighten import MAX_LEVELS, tighten
+from intervals.tracker import IntervalTracker, TrackerSettings
+from tests.helpers import random_scan_case
+from tests.intervals.test_contractor import _with_outliers, _wrong_readings
+
+GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
+
+
+def _poses_in(boxes, truth, rng, count):
+    """Poses ``(count + 400, 3)``: uniform in the union of ``boxes`` (a box picked by
+    volume), and near the truth."""
+    vol = np.prod(boxes[:, :, 1] - boxes[:, :, 0], axis=1)
+    pick = rng.choice(boxes.shape[0], size=count, p=vol / vol.sum())
+    lo, hi = boxes[pick, :, 0], boxes[pick, :, 1]
+    uniform = np.clip(lo + rng.random((count, 3)) * (hi - lo), lo, hi)
+    near = truth + rng.normal(0, 1, (400, 3)) * np.array([0.02, 0.02, 0.01])
+    return np.concatenate([uniform, near])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gamma", GAMMAS_RAD)
+def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
+    """Random rooms, belts and noise (errors on their bounds), outliers, q in 0..2, with and
+    without free space: no sampled consistent pose of the paved set leaves the tightened set,
+    which is smaller."""
+    rng = np.random.default_rng(int(gamma * 1e6) + 13)
+    kept, ratios = 0, []
+    for case in range(9):  # every pair of q in 0..2 and levels 3, 6, 9
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        q = case % 3
+        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        centre = truth + rng.uniform(-1, 1, 3) * np.array([0.2, 0.2, 0.1])
+        prior = np.stack([centre - [0.4, 0.4, 0.2], centre + [0.4, 0.4, 0.2]], axis=-1)
+        prior[:, 0] = np.minimum(prior[:, 0], truth)
+        prior[:, 1] = np.maximum(prior[:, 1], truth)
+        plain = localize(scan, prior, 0.05, q=q)
+        if plain.is_empty:
+            continue
+        levels = (3, 6, 9)[case // 3]
+        tight = localize(scan, prior, 0.05, q=q, tighten_levels=levels)
+        poses = _poses_in(plain.outer, truth, rng, 2000)
+        fits = _wrong_readings(poses, scan, params) <= q
+        inside = contains_points(tight.outer, poses).any(axis=0)
+        assert not np.any(fits & ~inside), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+        ratios.append(tight.volume() / plain.volume())
+    assert kept > 500  # the check saw many consistent poses
+    assert max(ratios) <= 1.0 and np.median(ratios) < 0.5  # it tightens, never widens
+
+
+@pytest.mark.slow
+def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
+    """GOMNE with tightening: the guaranteed set holds every consistent pose at q_max, and its
+    minimal set (read off the pieces' counts) every pose with at most q wrong readings."""
+    rng = np.random.default_rng(29)
+    for case in range(6):
+        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
+        scan = _with_outliers(scan, rng, case % 2)
+        prior = np.stack([truth - [0.3, 0.3, 0.15], truth + [0.3, 0.3, 0.15]], axis=-1)
+        plain = gomne(scan, prior, 0.05, q_max=2, guaranteed=True)
+        wide = gomne(scan, prior, 0.05, q_max=2, guaranteed=True, tighten_levels=6)
+        small = gomne(scan, prior, 0.05, q_max=2, guaranteed=False, tighten_levels=6)
+        assert wide.consistent and small.consistent and small.q <= 2
+        poses = _poses_in(plain.paving.outer, truth, rng, 3000)
+        wrong = _wrong_readings(poses, scan, params)
+        assert not np.any((wrong <= 2) & ~contains_points(wide.paving.outer, poses).any(axis=0))
+        assert not np.any(
+            (wrong <= small.q) & ~contains_points(small.paving.outer, poses).any(axis=0)
+        )
+        assert wide.paving.volume() <= plain.paving.volume()
+
+
+def _disk(boxes):
+    """``(keep, counts)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
+    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
+    near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
+    return near <= 1.0, (near > 0.5).astype(np.int64)
+
+
+def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
+    """On a 2-D disk test (exact bounds): the pieces cover the disk's sampled points and hold
+    less area; each piece carries its own test count; the caps stop it with a set as sound."""
+    edges = list(itertools.pairwise(np.linspace(-1.2, 1.2, 7)))
+    cells = np.array([[x, y] for x in edges for y in edges])
+    keep, counts = _disk(cells)
+    cells, counts = cells[keep], counts[keep]
+    points = np.random.default_rng(2).uniform(-1, 1, (3000, 2))
+    points = points[np.hypot(*points.T) <= 1]
+    out, out_counts, tested = tighten(cells, counts, _disk, None, None, 6)
+    assert contains_points(out, points).any(axis=0).all()
+    assert volume(out) < 0.8 * volume(cells) and tested > cells.shape[0]
+    assert np.array_equal(out_counts, _disk(out)[1])
+    # caps: the next call would exceed them, so the set comes back as it was
+    same, same_counts, none = tighten(cells, counts, _disk, None, None, 6, max_boxes=8)
+    assert np.array_equal(same, cells) and np.array_equal(same_counts, counts) and none == 0
+    part, _, seen = tighten(cells, counts, _disk, None, None, 6, max_tested=cells.shape[0] * 8)
+    assert seen == cells.shape[0] * 8 and contains_points(part, points).any(axis=0).all()
+    assert volume(out) <= volume(part) <= volume(cells)
+    room = 3 * cells.shape[0]  # room for a third of the boxes' children: the largest refined
+    some, some_counts, _ = tighten(cells, counts, _disk, None, None, 6, max_boxes=room)
+    assert some.shape[0] <= room and contains_points(some, points).any(axis=0).all()
+    assert volume(out) < volume(some) < volume(cells)
+    assert np.array_equal(some_counts, _disk(some)[1])
+
+    # a contractor that empties a row drops it; one that widens a row is clipped to it
+    def widening(b):
+        c = b.copy()
+        c[:, :, 0] -= 1.0
+        c[0] = np.nan
+        return c
+
+    children = np.concatenate(bisect(cells))
+    clipped, _, _ = tighten(cells, counts, _disk, widening, None, 1)
+    assert np.array_equal(clipped, children[_disk(children)[0]][1:])
+
+
+def test_bad_levels_are_refused():
+    rng = np.random.default_rng(0)
+    scan, _, truth = random_scan_case(rng, 0.2, False)
+    prior = np.stack([truth - 0.1, truth + 0.1], axis=-1)
+    for levels in (-1, MAX_LEVELS + 1, 1.5, True):
+        with pytest.raises(IntervalError, match="tighten_levels must be"):
+            localize(scan, prior, 0.05, tighten_levels=levels)  # type: ignore[arg-type]
+    with pytest.raises(IntervalError, match="tighten: levels must be"):
+        tighten(prior[None], np.zeros(1), _disk, None, None, MAX_LEVELS + 1)
+    with pytest.raises(IntervalError, match="counts"):
+        tighten(prior[None], np.zeros(2), _disk, None, None, 1)
+    with pytest.raises(IntervalError):
+        TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=1.0, tighten_levels=MAX_LEVELS + 1)
+
+
+def test_tracker_with_tightening_keeps_the_truth_in_smaller_sets():
+    """The tracker, from a box round the truth over a few scans of a still robot: the
+    tightened sets hold the truth and are smaller than the plain ones."""
+    rng = np.random.default_rng(5)
+    scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=True)
+    bounds = np.array([[0.0, 10.0], [0.0, 10.0]])
+    plain = IntervalTracker(TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=1.0), bounds)
+    tight = IntervalTracker(
+        TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=1.0, tighten_levels=9), bounds
+    )
+    previous = {"plain": None, "tight": None}
+    for _ in range(3):
+        for key, tracker in (("plain", plain), ("tight", tight)):
+            result = tracker.step(previous[key], scan, 0.25)
+            assert result.consistent and result.paving.contains(truth[None])[0]
+            previous[key] = result.paving
+    assert previous["tight"].volume() < 0.5 * previous["plain"].volume()
+    # under the smallest budget (8 boxes, binding here) the report stays within it, fine, sound
+    capped = IntervalTracker(
+        TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=1.0, tighten_levels=9, max_boxes=8),
+        bounds,
+    )
+    result = capped.step(previous["plain"], scan, 0.25)
+    assert result.consistent and not result.coarse and result.paving.contains(truth[None])[0]
+    assert result.paving.outer.shape[0] <= 8
+    assert previous["tight"].volume() < result.paving.volume() < previous["plain"].volume()
