@@ -15,7 +15,7 @@ import shapely
 from scipy import special
 
 from robotsim.control import Route
-from robotsim.maps import point_segment_distance
+from robotsim.maps import nearest_segment_distance, point_segment_distance
 from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
 from scenarios.epochs import STATUS
@@ -67,17 +67,7 @@ def wall_stats(pose: np.ndarray, segments: np.ndarray, reach_m: float) -> dict[s
     ``reach_m`` is the robot radius plus the walls' collision radius; a gap below
     ``CONTACT_GAP_M`` is a contact (pymunk lets shapes overlap by its collision slop).
     """
-    # Chunks of samples keep the (samples, segments) distance array near 8 MB on any map.
-    chunk = max(1, 1_000_000 // max(1, len(segments)))
-    distance = np.concatenate(
-        [
-            point_segment_distance(
-                pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
-            ).min(axis=1)
-            for start in range(0, len(pose), chunk)
-        ]
-    )
-    gap = distance - reach_m
+    gap = nearest_segment_distance(pose[:, :2], segments) - reach_m
     return {
         "min_gap_m": float(gap.min()),
         "contact_samples": int(np.count_nonzero(gap < CONTACT_GAP_M)),
@@ -361,16 +351,7 @@ def safety_stats(
     margin = spec.safety_margin_m
     reach = spec.robot.radius_m + log.world.wall_radius_m
     segments = spec.map.segments
-    chunk = max(1, 1_000_000 // max(1, len(segments)))
-    distance = np.concatenate(
-        [
-            point_segment_distance(
-                log.pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
-            ).min(axis=1)
-            for start in range(0, len(log.pose), chunk)
-        ]
-    )
-    inside = distance - reach < margin
+    inside = nearest_segment_distance(log.pose[:, :2], segments) - reach < margin
     clear_at_epoch = set_wall_distance_m(epochs, segments) - reach > margin  # NaN: False
     latest = np.searchsorted(epoch_index, np.arange(len(log.t_s)), side="right") - 1
     said_clear = np.where(latest >= 0, clear_at_epoch[np.maximum(latest, 0)], False)
