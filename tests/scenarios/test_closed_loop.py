@@ -11,6 +11,7 @@ import pytest
 
 from robotsim.sensors.sonar import readings_from_draws
 from robotsim.simulation import SensorNoise
+from scenarios.epochs import EpochLog
 from scenarios.metrics import WAYPOINT_REACHED_M, route_stats
 from scenarios.pipeline import FUSED, Steering, estimate, gathered, localizer_for
 from scenarios.runner import run_scenario, simulate_spec
@@ -60,6 +61,16 @@ def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
     online, _ = gathered(localizer, log)
     after, _ = estimate(spec, log)
     np.testing.assert_array_equal(online.pose, after.pose)
+    # the epoch log reuses the fusion's components: the same as computing them all again
+    records = localizer.epochs
+    assert any(r.components is not None for r in records)
+    again = EpochLog.collect(
+        online.epochs.t_s,
+        [r.result for r in records],
+        log.sonar_pose[np.searchsorted(log.sonar_t_s, online.epochs.t_s)],
+    )
+    np.testing.assert_array_equal(online.epochs.labels, again.labels)
+    np.testing.assert_array_equal(online.epochs.components, again.components)
     # the controller was fed the fused estimate at its ticks (every 10 samples at 10 Hz), one
     # sample late (the first: the start pose)
     stride = spec.control_stride
