@@ -485,8 +485,8 @@ class _SensorStream:
         self.scans = scans
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.done = 0  # samples handed over so far
+        self.t_s = np.arange(count) / rate_hz  # the log's sample times
         self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
-        self.counted = np.zeros((1, 2))  # ticks counted so far
         shape = (len(scans), sensors.sonar.count)  # the scans handed over, for the log
         self._true_range, self._readings = np.full(shape, np.nan), np.full(shape, np.nan)
         self._fault = np.zeros(shape, dtype=bool)
@@ -523,19 +523,20 @@ class _SensorStream:
                 )
         turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
         total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
-        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))
-        ticks = np.diff(np.concatenate([self.counted, counted[1:]]), axis=0).astype(np.int64)
-        self.turned, self.counted = total[-1:], counted[-1:]
+        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))  # row 0: the last
+        ticks = (counted[1:] - counted[:-1]).astype(np.int64)
+        self.turned = total[-1:]
         velocity = window[:, 3:5]
         rows = slice(start - low, stop - low)
         gyro = velocity[rows, 1] + noise.gyro_bias[start:stop] + noise.gyro_white[start:stop]
         force = specific_force(velocity, rate_hz)[rows]
         accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
-        t_s = np.arange(start, stop) / rate_hz
-        in_block = self.scans[(self.scans >= start) & (self.scans < stop)]
+        t_s = self.t_s[start:stop]
+        first = self._scans_done  # the scans are handed over in order
+        m = np.arange(first, first + int(np.searchsorted(self.scans[first:], stop)))
+        in_block = self.scans[m]
         readings = np.zeros((0, self.sensors.sonar.count))
         if in_block.size:
-            m = np.searchsorted(self.scans, in_block)
             pose = window[in_block - low, :3].copy()
             pose[:, 2] = wrap_angle(pose[:, 2])
             draws = tuple(draw[m] for draw in noise.sonar)
