@@ -321,7 +321,7 @@ class OnlineLocalizer:
         if not self._samples.count:
             x, y, theta = self._initial.mean[branch, :3].tolist()
             return x, y, theta
-        return self._advanced().mean_pose(branch)
+        return self._dead_reckoning_at_latest().mean_pose(branch)
 
     @property
     def map_segments(self) -> np.ndarray:
@@ -358,9 +358,9 @@ class OnlineLocalizer:
 
     def _advance(self) -> Gaussian:
         """Run the dead reckoning over the samples pushed since the last run (one call)."""
-        return self._advanced().belief
+        return self._dead_reckoning_at_latest().belief
 
-    def _advanced(self) -> DeadReckoning:
+    def _dead_reckoning_at_latest(self) -> DeadReckoning:
         """The dead reckoning run over the samples pushed since the last run (one call)."""
         samples = self._samples
         dr = self._dr
