@@ -341,6 +341,27 @@ def odometry_data(
         EstimationError: shapes that do not agree, a non-finite reading (naming the array and
             the first bad sample), a bad ``dt_s``.
     """
+    accel_input, z = odometry_inputs(ticks, gyro_rad_s, accel_m_s2, dt_s, robot)
+    return OdometryData(
+        dt_s,
+        accel_input,
+        z,
+        robot.wheel_base_m,
+        noise.measurement_cov(robot, dt_s),
+        noise.process_cov(dt_s),
+    )
+
+
+def odometry_inputs(
+    ticks, gyro_rad_s, accel_m_s2, dt_s: float, robot: NominalRobot
+) -> tuple[np.ndarray, np.ndarray]:
+    """The per-sample inputs of :func:`odometry_data` without the noise model (the online
+    localiser's stretches, appended to the data it started with): the forward acceleration
+    input ``(N,)`` or ``(N, B)`` and the measurements ``z (N, 3)`` or ``(N, B, 3)``.
+
+    Raises:
+        EstimationError: as :func:`odometry_data`.
+    """
     _positive("odometry_data", dt_s=dt_s)
     ticks = np.asarray(ticks)
     gyro = np.asarray(gyro_rad_s, dtype=float)
@@ -368,14 +389,7 @@ def odometry_data(
     forward = accel[..., 0]
     accel_input = forward.copy()
     accel_input[1:] = 0.5 * (forward[1:] + forward[:-1])
-    return OdometryData(
-        dt_s,
-        accel_input,
-        z,
-        robot.wheel_base_m,
-        noise.measurement_cov(robot, dt_s),
-        noise.process_cov(dt_s),
-    )
+    return accel_input, z
 
 
 # --------------------------------------------------------------------------- the filters
@@ -498,7 +512,8 @@ class DeadReckoning:
             raise EstimationError(
                 f"DeadReckoning: the data hold {data.z.shape[1]} runs, the belief {batch}"
             )
-        self.data = data
+        self._data = data
+        self._count = data.count  # samples held (the buffers may hold more rows)
         self.settings = settings
         self.index = 0
         count = data.count
@@ -512,6 +527,21 @@ class DeadReckoning:
         self._buffers: tuple[np.ndarray, np.ndarray] | None = None  # (accel, z) grown by extend
         self._speed_correction = np.zeros(batch)  # the last update's correction of v, m/s
         self._compiled = _CompiledStep(data, settings)
+
+    @property
+    def data(self) -> OdometryData:
+        """The per-sample inputs so far (views of the buffers :meth:`extend` grows)."""
+        if self._data.count != self._count:
+            accel, z = self._buffers  # type: ignore[misc]
+            self._data = dataclasses.replace(
+                self._data, accel_input_m_s2=accel[: self._count], z=z[: self._count]
+            )
+        return self._data
+
+    @property
+    def count(self) -> int:
+        """Number of samples held (``data.count``)."""
+        return self._count
 
     @property
     def belief(self) -> Gaussian:
@@ -567,22 +597,29 @@ class DeadReckoning:
                 "DeadReckoning.extend: the samples must have the period, wheel base, noise and "
                 "batch layout of the data"
             )
-        old, new = data.count, data.count + more.count
+        self.append_inputs(more.accel_input_m_s2, more.z)
+
+    def append_inputs(self, accel_input_m_s2: np.ndarray, z: np.ndarray) -> None:
+        """Append per-sample inputs ``(n, ...)`` of the data's own model (from
+        :func:`odometry_inputs` with the data's robot and period; :meth:`extend` checks the
+        model, this does not: the online localiser's stretches of one run)."""
+        old, new = self._count, self._count + z.shape[0]
         if self._buffers is None or new > self._buffers[0].shape[0]:
+            data = self.data
             capacity = max(new, 2 * old)
-            accel, z = (
+            accel_rows, z_rows = (
                 np.empty((capacity,) + data.accel_input_m_s2.shape[1:]),
                 np.empty((capacity,) + data.z.shape[1:]),
             )
-            accel[:old], z[:old] = data.accel_input_m_s2, data.z
-            self._buffers = (accel, z)
+            accel_rows[:old], z_rows[:old] = data.accel_input_m_s2, data.z
+            self._buffers = (accel_rows, z_rows)
             self._mean_hist = _grown(self._mean_hist, capacity)
             self._cov_hist = _grown(self._cov_hist, capacity)
             self._nis_hist = _grown(self._nis_hist, capacity)
-        accel, z = self._buffers
-        accel[old:new], z[old:new] = more.accel_input_m_s2, more.z
-        self.data = dataclasses.replace(data, accel_input_m_s2=accel[:new], z=z[:new])
-        self._compiled.bind(self.data)  # views of the buffers, not copies
+            self._compiled.bind_rows(accel_rows, z_rows)  # views of the buffers, not copies
+        accel_rows, z_rows = self._buffers
+        accel_rows[old:new], z_rows[old:new] = accel_input_m_s2, z
+        self._count = new
 
     def run(self, until_index: int) -> Gaussian:
         """Advance to sample ``until_index`` (inclusive) and return the belief there.
@@ -594,15 +631,26 @@ class DeadReckoning:
                 (from the Cholesky factorisation). The belief and ``index`` then stay where
                 they were.
         """
-        if not (self.index <= until_index < self.data.count):
+        self.advance(until_index)
+        return self.belief
+
+    def advance(self, until_index: int) -> None:
+        """:meth:`run` without building the belief (read it with :meth:`mean_pose`)."""
+        if not (self.index <= until_index < self._count):
             raise EstimationError(
-                f"DeadReckoning.run: until_index must be in [{self.index}, {self.data.count - 1}], got {until_index}"
+                f"DeadReckoning.run: until_index must be in [{self.index}, {self._count - 1}], got {until_index}"
             )
         start = self.index + 1
         if until_index >= start:
             self._steps(start, until_index + 1)
             self.index = until_index
-        return self.belief
+
+    def mean_pose(self, row: int) -> tuple[float, float, float]:
+        """The current mean ``(x_m, y_m, theta_rad)`` of batch row ``row``, heading wrapped:
+        ``belief.mean[row, :3]`` without building the belief."""
+        theta = wrap_angle(self._mean[:, THETA])  # the whole column, as :attr:`belief` wraps it
+        x, y = self._mean[row, :2].tolist()
+        return x, y, float(theta[row])
 
     def _steps(self, start: int, stop: int) -> None:
         """Samples ``start..stop-1`` from the current belief, recorded (the compiled step)."""
@@ -666,9 +714,14 @@ class _CompiledStep:
 
     def bind(self, data: OdometryData) -> None:
         """Take the per-sample inputs of ``data`` (the same model: :meth:`DeadReckoning.extend`)."""
-        count = data.count
-        self.accel = _compiled_input(data.accel_input_m_s2).reshape(count, -1)  # (N, B|1)
-        self.z = _compiled_input(data.z).reshape(count, -1, 3)  # (N, B|1, 3)
+        self.bind_rows(data.accel_input_m_s2, data.z)
+
+    def bind_rows(self, accel_input_m_s2: np.ndarray, z: np.ndarray) -> None:
+        """Take per-sample input rows (possibly more than the data hold: the steps read the
+        rows they run only)."""
+        count = z.shape[0]
+        self.accel = _compiled_input(accel_input_m_s2).reshape(count, -1)  # (N, B|1)
+        self.z = _compiled_input(z).reshape(count, -1, 3)  # (N, B|1, 3)
 
     def run(self, mean, cov, speed_correction, start, stop, mean_hist, cov_hist, nis_hist):
         """Samples ``start..stop-1`` from the belief ``mean (B, 8)``, ``cov (B, 8, 8)`` at

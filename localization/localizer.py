@@ -44,6 +44,7 @@ from localization.dead_reckoning import (
     NominalRobot,
     initial_belief,
     odometry_data,
+    odometry_inputs,
 )
 from localization.errors import EstimationError
 from localization.fusion import FusionRule, fuse
@@ -109,7 +110,8 @@ class EpochRecord:
     """One interval epoch: the scan time ``t_s`` and its odometry ``sample``; the tracker's
     ``result``; the fused branch's pose ``before (3,)`` and ``after (3,)`` the fusion;
     ``fused_box (3, 2)``, the hull the fusion used (NaN without fusion), and ``component``, its
-    label (-1: no fusion)."""
+    label (-1: no fusion); ``components``: ``result.components()`` as the fusion took them
+    (None where the epoch was not fused: not computed)."""
 
     t_s: float
     sample: int
@@ -118,6 +120,7 @@ class EpochRecord:
     after: np.ndarray
     fused_box: np.ndarray
     component: int
+    components: tuple[int, np.ndarray] | None = None
 
 
 class _Samples:
@@ -273,14 +276,23 @@ class OnlineLocalizer:
         found = dataclasses.replace(found, refinement=None)
         tick = time.perf_counter()
         before = np.array(belief.mean[FUSED, :3])
-        box, component = np.full((3, 2), np.nan), -1
+        box, component, components = np.full((3, 2), np.nan), -1, None
         if found.consistent:
-            outer, labels = found.outer, found.components()[1]
-            belief, report = fuse(belief, outer, labels, rows=(FUSED,), rule=self.settings.fusion)
+            outer, components = found.outer, found.components()
+            belief, report = fuse(
+                belief, outer, components[1], rows=(FUSED,), rule=self.settings.fusion
+            )
             self._dr_or_fail().replace(belief)
             component, box = int(report.component[0]), report.hull[0]
         record = EpochRecord(
-            t_s, samples.count - 1, found, before, np.array(belief.mean[FUSED, :3]), box, component
+            t_s,
+            samples.count - 1,
+            found,
+            before,
+            np.array(belief.mean[FUSED, :3]),
+            box,
+            component,
+            components,
         )
         self.epochs.append(record)
         self.fusion_s += time.perf_counter() - tick
@@ -301,6 +313,15 @@ class OnlineLocalizer:
         return PoseEstimate(
             t_s, sample, np.array(belief.mean[:, :3]), np.array(belief.cov[:, :3, :3])
         )
+
+    def pose(self, branch: int) -> tuple[float, float, float]:
+        """The mean pose ``(x_m, y_m, theta_rad)`` of row ``branch`` at the latest sample:
+        ``estimate().pose[branch]`` without the covariances (what a controller steers on,
+        at every control tick)."""
+        if not self._samples.count:
+            x, y, theta = self._initial.mean[branch, :3].tolist()
+            return x, y, theta
+        return self._dead_reckoning_at_latest().mean_pose(branch)
 
     @property
     def map_segments(self) -> np.ndarray:
@@ -337,33 +358,42 @@ class OnlineLocalizer:
 
     def _advance(self) -> Gaussian:
         """Run the dead reckoning over the samples pushed since the last run (one call)."""
+        return self._dead_reckoning_at_latest().belief
+
+    def _dead_reckoning_at_latest(self) -> DeadReckoning:
+        """The dead reckoning run over the samples pushed since the last run (one call)."""
         samples = self._samples
-        done = 0 if self._dr is None else self._dr.data.count
+        dr = self._dr
+        done = 0 if dr is None else dr.count
         if done < samples.count:
             # one sample of overlap: the accelerometer input of a step averages two readings
             start = max(done - 1, 0)
-            data = odometry_data(
-                samples.ticks[start : samples.count],
-                samples.gyro[start : samples.count],
-                samples.accel[start : samples.count],
-                self.settings.dt_s,
-                self.robot,
-                self.settings.noise,
-            )
-            if self._dr is None:
-                self._dr = DeadReckoning(data, self._initial, self.settings.dead_reckoning)
-            else:
-                self._dr.extend(
-                    dataclasses.replace(
-                        data, accel_input_m_s2=data.accel_input_m_s2[1:], z=data.z[1:]
-                    )
+            rows = slice(start, samples.count)
+            if dr is None:
+                data = odometry_data(
+                    samples.ticks[rows],
+                    samples.gyro[rows],
+                    samples.accel[rows],
+                    self.settings.dt_s,
+                    self.robot,
+                    self.settings.noise,
                 )
+                dr = self._dr = DeadReckoning(data, self._initial, self.settings.dead_reckoning)
+            else:  # the same model: the inputs only
+                accel_input, z = odometry_inputs(
+                    samples.ticks[rows],
+                    samples.gyro[rows],
+                    samples.accel[rows],
+                    self.settings.dt_s,
+                    self.robot,
+                )
+                dr.append_inputs(accel_input[1:], z[1:])
         dr = self._dr_or_fail()
         steps = samples.count - 1 - dr.index
         tick = time.perf_counter()
-        belief = dr.run(samples.count - 1)
+        dr.advance(samples.count - 1)
         elapsed = time.perf_counter() - tick
         self.dead_reckoning_s += elapsed
         if steps > 0:
             self.step_us.append(elapsed / steps * 1e6)
-        return belief
+        return dr

@@ -64,6 +64,20 @@ class Obstacle:
             raise RobotsimError(f"obstacle: {reason}")
         if self.loop and len(path) == 0:
             raise RobotsimError("obstacle: a looping obstacle needs a path")
+        # per-obstacle constants, built once (the world places a moving one at every step)
+        if self.polygon:
+            centroid = shapely.Polygon(vertices).centroid
+            reference = np.array([centroid.x, centroid.y])
+        else:
+            reference = vertices.mean(axis=0)
+        reference.setflags(write=False)
+        object.__setattr__(self, "_reference", reference)
+        points = np.vstack([reference, path, *([reference[None]] if self.loop else [])])
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+        for array in (points, along):
+            array.setflags(write=False)
+        object.__setattr__(self, "_points", points)
+        object.__setattr__(self, "_along", along)
 
     @property
     def moving(self) -> bool:
@@ -72,11 +86,8 @@ class Obstacle:
 
     @property
     def reference_m(self) -> np.ndarray:
-        """``(2,)`` the point the path starts at: the centroid."""
-        if not self.polygon:
-            return self.vertices_m.mean(axis=0)
-        centroid = shapely.Polygon(self.vertices_m).centroid
-        return np.array([centroid.x, centroid.y])
+        """``(2,)`` the point the path starts at: the centroid (read-only)."""
+        return self._reference  # type: ignore[attr-defined]
 
     def edges_m(self) -> np.ndarray:
         """``(e, 2, 2)`` the edges at ``t = 0`` (a polygon's closed ring, or the segment)."""
@@ -86,16 +97,14 @@ class Obstacle:
 
     def _path_points(self) -> np.ndarray:
         """``(w + 1, 2)`` (or ``w + 2`` when looping) the path's points, from the start."""
-        start = self.reference_m
-        return np.vstack([start, self.path_m, *([start[None]] if self.loop else [])])
+        return self._points  # type: ignore[attr-defined]
 
     def offset_m(self, t_s) -> np.ndarray:
         """``(..., 2)`` its displacement from where it starts at times ``t_s (...)``."""
         t_s = np.asarray(t_s, dtype=np.float64)
         if not self.moving:
             return np.zeros(t_s.shape + (2,))
-        points = self._path_points()
-        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+        points, along = self._points, self._along  # type: ignore[attr-defined]
         length = along[-1]
         travelled = self.speed_m_s * t_s
         if length == 0.0:

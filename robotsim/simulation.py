@@ -8,7 +8,8 @@ faults on leaves the other sensors' draws unchanged).
 Closed loop (an :class:`Observer`: the robot's estimator): the noise does not depend on the
 motion, so it is drawn before the loop; at each control tick (every ``control_stride``
 steps) the loop computes the readings of the samples since the last tick from it (the
-same arithmetic as the vectorised pass, which still writes the log), hands them to the
+same arithmetic as the vectorised pass, which still writes the odometry and IMU log; the
+sonar scans, the costly part, are logged as the loop computed them), hands them to the
 observer and steers on the pose the observer gives back, the command held until the next
 tick. The controller thus sees the estimate one sample late (the accelerometer's central
 difference at a sample needs the next one), a 10 ms latency at 100 Hz.
@@ -293,7 +294,10 @@ def simulate(
     accel = specific_force(velocity, rate_hz) + noise.accel_bias + noise.accel_white
     gyro_bias, accel_bias = noise.gyro_bias, noise.accel_bias
 
-    true_range, readings, fault = sonar.scans(pose[scans], t_s[scans], noise.sonar)
+    if stream is not None:  # the closed loop computed every scan as it came
+        true_range, readings, fault = stream.sonar_log()
+    else:
+        true_range, readings, fault = sonar.scans(pose[scans], t_s[scans], noise.sonar)
 
     return SimulationLog(
         t_s=t_s,
@@ -481,8 +485,25 @@ class _SensorStream:
         self.scans = scans
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.done = 0  # samples handed over so far
+        self.t_s = np.arange(count) / rate_hz  # the log's sample times
         self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
-        self.counted = np.zeros((1, 2))  # ticks counted so far
+        shape = (len(scans), sensors.sonar.count)  # the scans handed over, for the log
+        self._true_range, self._readings = np.full(shape, np.nan), np.full(shape, np.nan)
+        self._fault = np.zeros(shape, dtype=bool)
+        self._scans_done = 0
+
+    def sonar_log(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """True ranges, readings and fault mask ``(M, k)`` of every scan, as handed over (the
+        rows the whole-run pass computes: a row depends on its own pose, time and draws).
+
+        Raises:
+            RobotsimError: some scans were not handed over (the run stopped early).
+        """
+        if self._scans_done != len(self.scans):
+            raise RobotsimError(
+                f"sonar: {self._scans_done} of {len(self.scans)} scans were handed over"
+            )
+        return self._true_range, self._readings, self._fault
 
     def emit(self, stop: int, states: list, observer: Observer) -> None:
         """Hand samples ``done .. stop - 1`` (and their scans) to ``observer``; ``states``
@@ -502,23 +523,26 @@ class _SensorStream:
                 )
         turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
         total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
-        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))
-        ticks = np.diff(np.concatenate([self.counted, counted[1:]]), axis=0).astype(np.int64)
-        self.turned, self.counted = total[-1:], counted[-1:]
+        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))  # row 0: the last
+        ticks = (counted[1:] - counted[:-1]).astype(np.int64)
+        self.turned = total[-1:]
         velocity = window[:, 3:5]
         rows = slice(start - low, stop - low)
         gyro = velocity[rows, 1] + noise.gyro_bias[start:stop] + noise.gyro_white[start:stop]
         force = specific_force(velocity, rate_hz)[rows]
         accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
-        t_s = np.arange(start, stop) / rate_hz
-        in_block = self.scans[(self.scans >= start) & (self.scans < stop)]
+        t_s = self.t_s[start:stop]
+        first = self._scans_done  # the scans are handed over in order
+        m = np.arange(first, first + int(np.searchsorted(self.scans[first:], stop)))
+        in_block = self.scans[m]
         readings = np.zeros((0, self.sensors.sonar.count))
         if in_block.size:
-            m = np.searchsorted(self.scans, in_block)
             pose = window[in_block - low, :3].copy()
             pose[:, 2] = wrap_angle(pose[:, 2])
             draws = tuple(draw[m] for draw in noise.sonar)
-            _, readings, _ = self.sonar.scans(pose, in_block / rate_hz, draws)
+            true_range, readings, fault = self.sonar.scans(pose, in_block / rate_hz, draws)
+            self._true_range[m], self._readings[m], self._fault[m] = true_range, readings, fault
+            self._scans_done += len(m)
         begin = 0
         for scan, sample in enumerate(in_block.tolist()):  # each scan after its sample
             end = sample - start + 1

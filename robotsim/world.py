@@ -35,6 +35,9 @@ from robotsim.robot import RobotParams
 
 _GRAVITY_M_S2 = 9.81
 
+#: Steps of moving-obstacle positions computed at once (:meth:`World._mover_track`).
+MOVER_BLOCK_STEPS = 1024
+
 #: pymunk collision types: the robot's disk, the map's walls, the unmapped obstacles.
 ROBOT_SHAPE, WALL_SHAPE, OBSTACLE_SHAPE = 1, 0, 2
 
@@ -119,6 +122,8 @@ class World:
             wall.friction = params.wall_friction
             space.add(wall)
         self._movers: list[tuple[Obstacle, pymunk.Body]] = []  # each moving obstacle, its body
+        self._track: list = []  # per step from _track_start: each mover's position, velocity
+        self._track_start = 0
         for obstacle in obstacles.items:
             body = space.static_body
             origin = np.zeros(2)
@@ -184,13 +189,34 @@ class World:
 
     def _place_movers(self) -> None:
         """Put each moving obstacle where its path has it at :attr:`t_s`, with the velocity
-        that takes it to where it is one step later."""
-        for obstacle, body in self._movers:
-            now, then = obstacle.offset_m(np.array([self.t_s, self.t_s + self.dt_s]))
-            x, y = (obstacle.reference_m + now).tolist()
-            vx, vy = ((then - now) / self.dt_s).tolist()
-            body.position, body.velocity = (x, y), (vx, vy)
+        that takes it to where it is one step later (from :meth:`_mover_track`)."""
+        if not self._movers:
+            return
+        row = self._steps - self._track_start
+        if not 0 <= row < len(self._track):
+            self._mover_track()
+            row = 0
+        for (_, body), (position, velocity) in zip(self._movers, self._track[row], strict=True):
+            body.position, body.velocity = position, velocity
             self._space.reindex_shapes_for_body(body)
+
+    def _mover_track(self) -> None:
+        """The moving obstacles' positions and velocities at the next :data:`MOVER_BLOCK_STEPS`
+        steps from this one, computed at once (each step's values are those of the step's own
+        time ``t = steps * dt``: the path lookups are element-wise)."""
+        t_s = np.arange(self._steps, self._steps + MOVER_BLOCK_STEPS) * self.dt_s
+        columns = []
+        for obstacle, _ in self._movers:
+            now, then = obstacle.offset_m(t_s), obstacle.offset_m(t_s + self.dt_s)
+            columns.append(
+                zip(
+                    map(tuple, (obstacle.reference_m + now).tolist()),
+                    map(tuple, ((then - now) / self.dt_s).tolist()),
+                    strict=True,
+                )
+            )
+        self._track = list(zip(*columns, strict=True))
+        self._track_start = self._steps
 
     def check_free(self, pose, t_s: float | None = None) -> np.ndarray:
         """The pose as a float array ``(3,)`` if the robot's disk fits there (clear of all

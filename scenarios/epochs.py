@@ -92,11 +92,22 @@ class EpochLog:
     coarse: np.ndarray
 
     @classmethod
-    def collect(cls, t_s: np.ndarray, results: list[EpochResult], truth: np.ndarray) -> EpochLog:
+    def collect(
+        cls,
+        t_s: np.ndarray,
+        results: list[EpochResult],
+        truth: np.ndarray,
+        known_components: list[tuple[int, np.ndarray] | None] | None = None,
+    ) -> EpochLog:
         """The log of the tracker's ``results`` (one per scan time ``t_s (E,)``), checked
-        against the true poses ``truth (E, 3)`` at the scans (for the containment figure)."""
+        against the true poses ``truth (E, 3)`` at the scans (for the containment figure).
+        ``known_components``: each result's ``components()`` where already computed (the
+        fusion's), None where not."""
         count = len(results)
-        components = [r.components() for r in results]
+        known = known_components if known_components is not None else [None] * count
+        components = [
+            r.components() if done is None else done for r, done in zip(results, known, strict=True)
+        ]
         outer = [r.outer for r in results]
         contains = np.array(
             [

@@ -15,7 +15,7 @@ import shapely
 from scipy import special
 
 from robotsim.control import Route
-from robotsim.maps import point_segment_distance
+from robotsim.maps import nearest_segment_distance, point_segment_distance
 from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
 from scenarios.epochs import STATUS
@@ -26,8 +26,11 @@ if TYPE_CHECKING:
     from scenarios.spec import ScenarioSpec
 
 
-def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
-    """The summary of a run of ``spec`` that produced ``log`` (no timing)."""
+def summarize(
+    spec: ScenarioSpec, log: SimulationLog, wall_distance: np.ndarray | None = None
+) -> dict[str, Any]:
+    """The summary of a run of ``spec`` that produced ``log`` (no timing); ``wall_distance``:
+    :func:`wall_distance_m` of the run if already computed."""
     summary: dict[str, Any] = {
         "scenario": spec.name,
         "seed": spec.run.seed,
@@ -39,7 +42,10 @@ def summarize(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
         "final_pose": [float(v) for v in log.pose[-1]],
     }
     summary["walls"] = wall_stats(
-        log.pose, spec.map.segments, spec.robot.radius_m + log.world.wall_radius_m
+        log.pose,
+        spec.map.segments,
+        spec.robot.radius_m + log.world.wall_radius_m,
+        wall_distance,
     )
     summary["walls"]["pymunk_contact_steps"] = int(np.count_nonzero(log.wall_contact))
     summary["walls"]["obstacle_contact_steps"] = int(np.count_nonzero(log.obstacle_contact))
@@ -61,23 +67,24 @@ def path_length_m(pose: np.ndarray) -> float:
 CONTACT_GAP_M = 0.005
 
 
-def wall_stats(pose: np.ndarray, segments: np.ndarray, reach_m: float) -> dict[str, Any]:
+def wall_distance_m(spec: ScenarioSpec, log: SimulationLog) -> np.ndarray:
+    """``(N,)`` the distance from the true position at each sample to the nearest wall of the
+    map, m (the summary's wall and safety figures share it)."""
+    return nearest_segment_distance(log.pose[:, :2], spec.map.segments)
+
+
+def wall_stats(
+    pose: np.ndarray, segments: np.ndarray, reach_m: float, distance_m: np.ndarray | None = None
+) -> dict[str, Any]:
     """Smallest gap between the footprint and a wall, and the samples in contact.
 
     ``reach_m`` is the robot radius plus the walls' collision radius; a gap below
     ``CONTACT_GAP_M`` is a contact (pymunk lets shapes overlap by its collision slop).
+    ``distance_m``: the distance from each position to the nearest wall, if computed.
     """
-    # Chunks of samples keep the (samples, segments) distance array near 8 MB on any map.
-    chunk = max(1, 1_000_000 // max(1, len(segments)))
-    distance = np.concatenate(
-        [
-            point_segment_distance(
-                pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
-            ).min(axis=1)
-            for start in range(0, len(pose), chunk)
-        ]
-    )
-    gap = distance - reach_m
+    if distance_m is None:
+        distance_m = nearest_segment_distance(pose[:, :2], segments)
+    gap = distance_m - reach_m
     return {
         "min_gap_m": float(gap.min()),
         "contact_samples": int(np.count_nonzero(gap < CONTACT_GAP_M)),
@@ -346,7 +353,11 @@ def set_wall_distance_m(epochs: EpochLog, segments: np.ndarray) -> np.ndarray:
 
 
 def safety_stats(
-    spec: ScenarioSpec, log: SimulationLog, epochs: EpochLog, epoch_index: np.ndarray
+    spec: ScenarioSpec,
+    log: SimulationLog,
+    epochs: EpochLog,
+    epoch_index: np.ndarray,
+    wall_distance: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """How often the true robot came within ``[route] safety_margin_m`` of the map's walls
     while its latest interval set said it was clear of them (every pose of the set farther
@@ -356,21 +367,14 @@ def safety_stats(
     :func:`wall_stats`). A set holds from its epoch's sample to the next epoch; before the
     first and after an epoch without a set, the set says nothing (not clear). With sets
     that always hold the truth the last share is 0 at the epoch samples; between epochs the
-    robot moves on.
+    robot moves on. ``wall_distance``: :func:`wall_distance_m` of the run if computed.
     """
     margin = spec.safety_margin_m
     reach = spec.robot.radius_m + log.world.wall_radius_m
     segments = spec.map.segments
-    chunk = max(1, 1_000_000 // max(1, len(segments)))
-    distance = np.concatenate(
-        [
-            point_segment_distance(
-                log.pose[start : start + chunk, None, :2], segments[:, 0], segments[:, 1]
-            ).min(axis=1)
-            for start in range(0, len(log.pose), chunk)
-        ]
-    )
-    inside = distance - reach < margin
+    if wall_distance is None:
+        wall_distance = wall_distance_m(spec, log)
+    inside = wall_distance - reach < margin
     clear_at_epoch = set_wall_distance_m(epochs, segments) - reach > margin  # NaN: False
     latest = np.searchsorted(epoch_index, np.arange(len(log.t_s)), side="right") - 1
     said_clear = np.where(latest >= 0, clear_at_epoch[np.maximum(latest, 0)], False)

@@ -221,8 +221,7 @@ class Steering:
         self.localizer.push_scan(t_s, readings_m)
 
     def pose(self) -> tuple[float, float, float]:
-        x, y, theta = self.localizer.estimate().pose[self.branch].tolist()
-        return x, y, theta
+        return self.localizer.pose(self.branch)
 
 
 def scan_samples(log: SensorData) -> np.ndarray:
@@ -279,6 +278,7 @@ def gathered(localizer: OnlineLocalizer, log: SensorData) -> tuple[Estimation, S
             np.array([r.t_s for r in records]),
             [r.result for r in records],
             log.sonar_pose[epoch_scans],
+            [r.components for r in records],
         ),
         epoch_index=epoch_index,
         before=np.array([r.before for r in records]) if records else empty,

@@ -26,7 +26,7 @@ from robotsim.simulation import KidnapEvent, Observer, SensorSuite, SimulationLo
 from robotsim.world import WorldParams
 from scenarios.errors import ScenarioError
 from scenarios.mcl_pipeline import Estimator, MclEstimation, estimate_mcl, mcl_summary
-from scenarios.metrics import route_stats, safety_stats, summarize
+from scenarios.metrics import route_stats, safety_stats, summarize, wall_distance_m
 from scenarios.pipeline import (
     BRANCHES,
     FUSED,
@@ -162,11 +162,14 @@ def run_scenario(
     except IntervalBudgetError as exc:  # a precision too fine for the map, met at run time
         raise ScenarioError(spec.source, "estimation.eps_m", str(exc)) from None
     times = dataclasses.replace(times, simulate_s=simulate_s)
-    summary = summarize(spec, log)
+    wall_distance = wall_distance_m(spec, log)
+    summary = summarize(spec, log, wall_distance)
     summary["estimator"] = str(Estimator.INTERVALS)
     summary.update(estimation_summary(log, estimation))
     summary["route"] = route_stats(spec, log)
-    summary["safety"] = safety_stats(spec, log, estimation.epochs, estimation.epoch_index)
+    summary["safety"] = safety_stats(
+        spec, log, estimation.epochs, estimation.epoch_index, wall_distance
+    )
     summary["sonar_failures"] = [
         {
             "start_s": failure.start_s,

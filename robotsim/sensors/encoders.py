@@ -38,13 +38,17 @@ def wheel_rotation_increments(pose, robot: RobotParams) -> np.ndarray:
     """True wheel rotations ``(N, 2)`` rad (left, right) from pose ``N-1`` to ``N`` along
     ``pose (N, 3)``; row 0 is zero."""
     pose = np.asarray(pose, dtype=np.float64)
-    step = np.diff(pose, axis=0)
-    turn = wrap_angle(step[:, 2])
-    heading = pose[:-1, 2] + 0.5 * turn
-    ds = step[:, 0] * np.cos(heading) + step[:, 1] * np.sin(heading)
-    half = 0.5 * robot.wheel_base_m * turn
-    travel = np.stack([ds - half, ds + half], axis=1)
-    return np.vstack([np.zeros((1, 2)), travel / robot.true_radii_m])
+    rotation = np.zeros((len(pose), 2))
+    if len(pose) > 1:  # written into one array: the closed loop calls this on a few rows
+        step = pose[1:] - pose[:-1]
+        turn = wrap_angle(step[:, 2])
+        heading = pose[:-1, 2] + 0.5 * turn
+        ds = step[:, 0] * np.cos(heading) + step[:, 1] * np.sin(heading)
+        half = 0.5 * robot.wheel_base_m * turn
+        left_radius_m, right_radius_m = robot.true_radii_m
+        rotation[1:, 0] = (ds - half) / left_radius_m
+        rotation[1:, 1] = (ds + half) / right_radius_m
+    return rotation
 
 
 def simulate_ticks(

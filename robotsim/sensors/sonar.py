@@ -40,14 +40,21 @@ def _inside_cone(w_x, w_y, c_x, c_y, cos_gamma):
 
 
 def _cone_distances_block(
-    s_x: np.ndarray, s_y: np.ndarray, phi: np.ndarray, a: np.ndarray, e: np.ndarray, gamma: float
+    s_x: np.ndarray,
+    s_y: np.ndarray,
+    axis: tuple[np.ndarray, np.ndarray],
+    edges: tuple[tuple[np.ndarray, np.ndarray], ...],
+    a: np.ndarray,
+    e: np.ndarray,
+    cos_gamma: float,
 ) -> np.ndarray:
-    """Cone distances ``(n, k)`` for sensor positions/axes ``(n, k, 1)`` and segments
-    ``a`` (start) and ``e = b - a`` (each ``(m, 2)``, or ``(n, 1, m, 2)``: per pose)."""
+    """Cone distances ``(...)`` for sensor positions ``s_x, s_y (..., 1)``, the unit cone
+    axes ``axis = (c_x, c_y)`` and the unit edge rays ``edges = ((u_x, u_y), (u_x, u_y))``
+    (``phi -/+ gamma``; each like ``s_x``), and segments ``a`` (start) and ``e = b - a``
+    (each ``(m, 2)``, or ``(..., m, 2)``: per pose): the minimum over the last axis."""
     a_x, a_y, e_x, e_y = a[..., 0], a[..., 1], e[..., 0], e[..., 1]
-    cos_gamma = np.cos(gamma)
-    c_x, c_y = np.cos(phi), np.sin(phi)
-    # offsets from the sensor to the segment start, (n, k, m)
+    c_x, c_y = axis
+    # offsets from the sensor to the segment start, (..., m)
     w_x, w_y = a_x - s_x, a_y - s_y
     best = np.full(np.broadcast_shapes(w_x.shape), np.inf)
 
@@ -65,8 +72,7 @@ def _cone_distances_block(
     # candidates 4 and 5: each edge ray u meets the segment at
     # rho = det(a - s, e) / det(u, e) (along the ray), tau = det(a - s, u) / det(u, e)
     det_w_e = _det(w_x, w_y, e_x, e_y)
-    for edge in (phi - gamma, phi + gamma):
-        u_x, u_y = np.cos(edge), np.sin(edge)
+    for u_x, u_y in edges:
         denominator = _det(u_x, u_y, e_x, e_y)
         with np.errstate(divide="ignore", invalid="ignore"):
             rho = det_w_e / denominator
@@ -74,6 +80,15 @@ def _cone_distances_block(
         hit = (denominator != 0.0) & (rho >= 0.0) & (tau >= -_SLACK) & (tau <= 1.0 + _SLACK)
         best = np.where(hit, np.minimum(best, rho), best)
     return best.min(axis=-1)
+
+
+#: Segments each pose looks at first on a large map (:func:`_near_cone_distances`).
+NEAR_SEGMENTS = 32
+
+#: Maps of more segments than this are computed nearest first; smaller ones whole (one
+#: scan of 16 sonars on 60 segments: 0.2 ms whole, 0.7 ms nearest first; on 495: 2.6 ms
+#: whole, 0.26 ms nearest first).
+LARGE_MAP_SEGMENTS = 4 * NEAR_SEGMENTS
 
 
 def cone_distances(
@@ -99,6 +114,8 @@ def cone_distances(
 
     Vectorised over poses, sensors and segments (broadcast arrays); large batches are cut
     into blocks of at most about a million pose-sensor-segment elements to bound memory.
+    On a map of more than :data:`LARGE_MAP_SEGMENTS` segments each pose looks at its
+    nearest ones first (:func:`_near_cone_distances`); the result is the same, bit for bit.
     """
     poses = np.asarray(poses, dtype=np.float64)
     segments = np.asarray(segments, dtype=np.float64)
@@ -128,25 +145,94 @@ def cone_distances(
     batch_shape = poses.shape[:-1]
     flat = poses.reshape(-1, 3)
     k, m = len(mount_angle_rad), segments.shape[-3]
+    out = np.full((len(flat), k), np.inf)
+    if m == 0:
+        return out.reshape(*batch_shape, k)
     x, y, theta = (flat[:, i, None] for i in range(3))  # (n, 1)
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     # s_i = (x, y) + R(theta) s~_i, axis phi_i = theta + theta~_i; shapes (n, k, 1)
     s_x = (x + cos_t * mount_xy[:, 0] - sin_t * mount_xy[:, 1])[..., None]
     s_y = (y + sin_t * mount_xy[:, 0] + cos_t * mount_xy[:, 1])[..., None]
     phi = (theta + mount_angle_rad)[..., None]
+    # the cone's axis and edge rays, computed once per (pose, sensor): every segment and
+    # every subset of them sees the same directions
+    axis = (np.cos(phi), np.sin(phi))
+    edges = tuple(
+        (np.cos(edge), np.sin(edge)) for edge in (phi - half_aperture_rad, phi + half_aperture_rad)
+    )
+    cone = _Cones(s_x, s_y, axis, edges, float(np.cos(half_aperture_rad)))
     a, e = segments[..., 0, :], segments[..., 1, :] - segments[..., 0, :]
 
-    out = np.full((len(flat), k), np.inf)
-    if m == 0:
+    if not per_pose and m > LARGE_MAP_SEGMENTS:
+        reach_m = float(np.hypot(mount_xy[:, 0], mount_xy[:, 1]).max())
+        block = max(1, _BLOCK_ELEMENTS // max(1, m * (k + 1)))
+        for start in range(0, len(flat), block):
+            rows = slice(start, start + block)
+            out[rows] = _near_cone_distances(cone, rows, flat[rows, :2], a, e, reach_m)
         return out.reshape(*batch_shape, k)
     block = max(1, _BLOCK_ELEMENTS // max(1, k * m))
     for start in range(0, len(flat), block):
         rows = slice(start, start + block)
         a_rows, e_rows = (a[rows, None], e[rows, None]) if per_pose else (a, e)
-        out[rows] = _cone_distances_block(
-            s_x[rows], s_y[rows], phi[rows], a_rows, e_rows, half_aperture_rad
-        )
+        out[rows] = cone.distances(rows, a_rows, e_rows)
     return out.reshape(*batch_shape, k)
+
+
+@dataclass(frozen=True, eq=False)
+class _Cones:
+    """The cones of ``n`` poses x ``k`` sensors: apexes ``s_x, s_y``, unit axes and unit edge
+    rays, each ``(n, k, 1)``, and ``cos(gamma)``."""
+
+    s_x: np.ndarray
+    s_y: np.ndarray
+    axis: tuple[np.ndarray, np.ndarray]
+    edges: tuple[tuple[np.ndarray, np.ndarray], ...]
+    cos_gamma: float
+
+    def distances(self, index, a: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """The cone distances of the cones ``[index]`` (any numpy index of the first axes)
+        to the segments ``a``, ``e`` (broadcast against them, segments last)."""
+        return _cone_distances_block(
+            self.s_x[index],
+            self.s_y[index],
+            (self.axis[0][index], self.axis[1][index]),
+            tuple((u_x[index], u_y[index]) for u_x, u_y in self.edges),
+            a,
+            e,
+            self.cos_gamma,
+        )
+
+
+def _near_cone_distances(
+    cone: _Cones, rows: slice, centre: np.ndarray, a: np.ndarray, e: np.ndarray, reach_m: float
+) -> np.ndarray:
+    """The cone distances ``(n, k)`` of the poses ``rows`` (robot centres ``centre (n, 2)``)
+    to the segments ``a``, ``e (m, 2)``, looking at each pose's :data:`NEAR_SEGMENTS` nearest
+    segments first.
+
+    Sensor i sits within ``reach_m`` of the centre, so a segment at distance ``D`` from the
+    centre is at least ``D - reach_m`` from the sensor. With ``R`` the distance of the
+    nearest segment left out, a cone distance ``d <= R - reach_m`` found among the nearest
+    ones is the minimum over the whole map (every other segment is at least as far); the
+    cones without such a distance (a far or no echo) are computed over the whole map. Both
+    go through the same arithmetic as a whole-map pass, so the minimum is its own bit for
+    bit (a slack of 1e-9 relative on the test keeps rounding on the safe side).
+    """
+    edge_sq = np.einsum("mi,mi->m", e, e)
+    offset = centre[:, None, :] - a  # (n, m, 2), from each segment's start to the centre
+    t = np.clip(np.einsum("nmi,mi->nm", offset, e) / edge_sq, 0.0, 1.0)
+    gap = np.hypot(offset[..., 0] - t * e[:, 0], offset[..., 1] - t * e[:, 1])  # (n, m)
+    near = np.argpartition(gap, NEAR_SEGMENTS, axis=1)  # the NEAR_SEGMENTS nearest first
+    left_out = np.take_along_axis(gap, near[:, NEAR_SEGMENTS, None], axis=1)  # (n, 1)
+    picked = near[:, None, :NEAR_SEGMENTS]  # (n, 1, K)
+    found = cone.distances(rows, a[picked], e[picked])  # (n, k)
+    scale = 1.0 + np.abs(centre).max(axis=1, keepdims=True) + left_out
+    settled = found <= left_out - reach_m - 1e-9 * scale
+    if not settled.all():
+        far_pose, far_sensor = np.nonzero(~settled)
+        index = (far_pose + rows.start, far_sensor)
+        found[far_pose, far_sensor] = cone.distances(index, a, e)
+    return found
 
 
 def _read_only(values: Any, shape_name: str) -> np.ndarray:

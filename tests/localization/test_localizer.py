@@ -6,7 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.dead_reckoning import DeadReckoning, initial_belief, odometry_data
+from localization.dead_reckoning import (
+    DeadReckoning,
+    initial_belief,
+    odometry_data,
+    odometry_inputs,
+)
 from localization.errors import EstimationError
 from localization.localizer import FUSED, UKF_ONLY
 from scenarios.pipeline import (
@@ -51,6 +56,8 @@ def test_sample_by_sample_equals_the_offline_pipeline_bit_for_bit(seed):
         if k % 37 == 0:  # asking for the estimate between scans changes nothing
             now = localizer.estimate()
             assert now.sample == k and now.pose.shape == (2, 3) and now.pose_cov.shape == (2, 3, 3)
+            for branch in (UKF_ONLY, FUSED):  # the controller's read: the same mean pose
+                assert localizer.pose(branch) == tuple(now.pose[branch].tolist())
         while scan < len(at_sample) and at_sample[scan] == k:
             record = localizer.push_scan(log.sonar_t_s[scan], log.sonar_range_m[scan])
             assert record is not None and record.sample == k
@@ -110,6 +117,22 @@ def test_extending_the_dead_reckoning_in_stretches_equals_one_run():
         grown.run(end - 1)
     np.testing.assert_array_equal(grown.history.mean, one.history.mean)
     np.testing.assert_array_equal(grown.history.cov, one.history.cov)
+    # the localiser's way: the inputs of each stretch appended, the pose read without a belief
+    appended = DeadReckoning(
+        odometry_data(*(a[:1] for a in args[:3]), args[3], localizer.robot, noise), start
+    )
+    for begin, end in ((1, 3), (3, 40), (40, 41), (41, whole.count)):
+        accel_input, z = odometry_inputs(
+            *(a[begin - 1 : end] for a in args[:3]), args[3], localizer.robot
+        )
+        appended.append_inputs(accel_input[1:], z[1:])
+        appended.advance(end - 1)
+        assert appended.count == end and appended.data.count == end
+        for row in (UKF_ONLY, FUSED):
+            assert appended.mean_pose(row) == tuple(appended.belief.mean[row, :3].tolist())
+    np.testing.assert_array_equal(appended.history.mean, one.history.mean)
+    np.testing.assert_array_equal(appended.history.cov, one.history.cov)
+    np.testing.assert_array_equal(appended.data.z, whole.z)
     with pytest.raises(EstimationError, match="period"):
         grown.extend(odometry_data(*(a[:2] for a in args[:3]), 0.02, localizer.robot, noise))
 

@@ -5,7 +5,11 @@ import numpy as np
 from robotsim.control import ScriptedProfile
 from robotsim.maps import builtin_map
 from robotsim.robot import RobotParams, wheel_rates
-from robotsim.sensors.encoders import EncoderParams, simulate_ticks
+from robotsim.sensors.encoders import (
+    EncoderParams,
+    simulate_ticks,
+    wheel_rotation_increments,
+)
 from robotsim.simulation import SensorSuite, simulate
 
 
@@ -62,3 +66,26 @@ def test_slip_changes_the_ticks_of_a_run():
     )
     assert not np.array_equal(clean.wheel_ticks, slipping.wheel_ticks)
     np.testing.assert_array_equal(clean.pose, slipping.pose)
+
+
+def test_wheel_rotations_follow_the_mid_step_heading_on_any_length():
+    """Each row from the step before it, computed one step at a time (the module's formula
+    with numpy's functions on one-element arrays), on windows of any length."""
+    robot = RobotParams()  # true radii 0.0503 and 0.0498 m: the columns differ
+    rng = np.random.default_rng(8)
+    for count in [1, 2, 3, 11, 500]:
+        pose = np.cumsum(rng.normal(0.0, [0.01, 0.01, 0.5], (count, 3)), axis=0)
+        got = wheel_rotation_increments(pose, robot)
+        assert got.shape == (count, 2) and not got[0].any()
+        for k in range(1, count):
+            dx, dy, dtheta = pose[k] - pose[k - 1]
+            turn = (dtheta + np.pi) % (2 * np.pi) - np.pi
+            heading = np.array([pose[k - 1, 2] + 0.5 * turn])
+            ds = dx * np.cos(heading)[0] + dy * np.sin(heading)[0]
+            half = 0.5 * robot.wheel_base_m * turn
+            np.testing.assert_allclose(
+                got[k],
+                np.array([ds - half, ds + half]) / robot.true_radii_m,
+                rtol=1e-12,
+                atol=1e-15,
+            )

@@ -95,3 +95,15 @@ def test_negative_parameters_are_refused():
         gyro(noise=-1.0)
     with pytest.raises(RobotsimError, match="turn_on_bias_std_m_s2"):
         accelerometer(turn_on=float("nan"))
+
+
+def test_specific_force_is_numpys_gradient_bit_for_bit_on_any_length():
+    """The written-out differences equal ``np.gradient`` (central inside, one-sided at the
+    ends) and ``v omega``, on the short windows the closed loop passes and on a whole run."""
+    rng = np.random.default_rng(5)
+    for count in [*range(1, 25), 6001]:
+        velocity = rng.normal(0.0, 0.5, (count, 2))
+        force = specific_force(velocity, 100.0)
+        a_x = np.gradient(velocity[:, 0], 0.01) if count > 1 else np.zeros(count)
+        np.testing.assert_array_equal(force[:, 0], a_x)
+        np.testing.assert_array_equal(force[:, 1], velocity[:, 0] * velocity[:, 1])

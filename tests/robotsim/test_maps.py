@@ -1,13 +1,25 @@
 """Segment maps: validation, loaders, the box query, the built-in maps."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
 
+from robotsim import maps
 from robotsim.errors import MapError
-from robotsim.maps import BUILTIN_MAP_NAMES, SegmentMap, builtin_map, outer_wall
+from robotsim.maps import (
+    BUILTIN_MAP_NAMES,
+    SegmentMap,
+    builtin_map,
+    nearest_segment_distance,
+    outer_wall,
+    point_segment_distance,
+)
+
+#: The built-in office floor plan (495 segments), a map file of the scenarios.
+OFFICE_FLOOR_WKT = Path(__file__).parents[2] / "scenarios" / "builtin" / "maps" / "office_floor.wkt"
 
 
 @pytest.mark.parametrize(
@@ -193,3 +205,40 @@ def test_a_room_gets_the_same_outer_wall_in_every_format():
     assert (
         SegmentMap.from_wkt("MULTILINESTRING ((0 0, 1 0, 1 1, 0 0), (5 5, 6 6))").boundary is None
     )
+
+
+def test_nearest_segment_distance_is_the_whole_arrays_minimum_bit_for_bit():
+    """The pruned nearest-wall distance against the minimum over every segment at once, on
+    random segment soups and on paths (consecutive samples, as the summary passes them)."""
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        segments = rng.uniform(-10.0, 10.0, (int(rng.integers(1, 300)), 2, 2))
+        count = int(rng.integers(1, 700))
+        if trial % 2:  # a path: small steps from a random start
+            points = np.cumsum(rng.normal(0.0, 0.02, (count, 2)), axis=0) + rng.uniform(-5, 5, 2)
+        else:
+            points = rng.uniform(-12.0, 12.0, (count, 2))
+        whole = point_segment_distance(points[:, None, :], segments[:, 0], segments[:, 1])
+        np.testing.assert_array_equal(nearest_segment_distance(points, segments), whole.min(axis=1))
+
+
+def test_nearest_segment_distance_on_a_floor_plan_skips_most_segments(monkeypatch):
+    """On the office floor (495 segments) a path's blocks look at a few segments each, and
+    the distances still equal the whole-map ones."""
+    floor = SegmentMap.from_wkt(OFFICE_FLOOR_WKT.read_text(encoding="utf-8"))
+    rng = np.random.default_rng(3)
+    points = np.cumsum(rng.normal(0.0, 0.004, (1500, 2)), axis=0) + np.array([5.0, 5.0])
+    seen = []
+    real = maps.point_segment_distance
+
+    def counting(p, a, b):
+        seen.append(len(a))
+        return real(p, a, b)
+
+    monkeypatch.setattr(maps, "point_segment_distance", counting)
+    got = nearest_segment_distance(points, floor.segments)
+    monkeypatch.undo()
+    whole = point_segment_distance(points[:, None, :], floor.segments[:, 0], floor.segments[:, 1])
+    np.testing.assert_array_equal(got, whole.min(axis=1))
+    exact_calls = seen[1::2]  # each block: the centre's distances (all), then the kept ones
+    assert max(exact_calls) < len(floor.segments) // 4

@@ -12,7 +12,7 @@ from robotsim.obstacles import Obstacle, Obstacles
 from robotsim.robot import RobotParams
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
 from robotsim.simulation import SensorSuite, SonarFailure, simulate
-from robotsim.world import World
+from robotsim.world import MOVER_BLOCK_STEPS, World
 
 HALL = builtin_map("hall")
 SQUARE = [[4.0, 4.0], [4.6, 4.0], [4.6, 4.6], [4.0, 4.6]]
@@ -132,6 +132,24 @@ def test_a_moving_obstacle_pushes_a_robot_that_stands_in_its_way():
     assert log.obstacle_contact.any() and not log.obstacle_contact[:140].any()  # met at 1.48 s
     assert (log.pose[:, 0] - reach - face).min() > -0.01
     assert 5.3 + reach < log.pose[-1, 0] < 5.3 + reach + 0.1
+
+
+def test_the_world_puts_each_moving_obstacle_on_its_path_at_every_step():
+    """The world's moving bodies, computed a block of steps at a time, stand where the path
+    has them at each step's time ``k / step_hz`` and move at the velocity reaching the next
+    step's place, for more steps than one block (two movers, one looping)."""
+    person = Obstacle(np.array(SQUARE), path_m=[[6.3, 4.3], [6.3, 6.3]], speed_m_s=0.5, loop=True)
+    cart = Obstacle(np.array([[7.0, 2.0], [7.5, 2.0]]), polygon=False, path_m=[[7.25, 6.0]])
+    world = World(HALL, RobotParams(), (2.0, 2.0, 0.0), obstacles=Obstacles((person, cart)))
+    bodies = [body for _, body in world._movers]
+    dt = world.dt_s
+    for k in range(MOVER_BLOCK_STEPS + 300):
+        t = k * dt
+        for obstacle, body in zip((person, cart), bodies, strict=True):
+            now, then = obstacle.offset_m(np.array([t, t + dt]))
+            assert tuple(body.position) == tuple((obstacle.reference_m + now).tolist())
+            assert tuple(body.velocity) == tuple(((then - now) / dt).tolist())
+        world.step(0.0, 0.0)
 
 
 def test_start_and_kidnap_poses_must_be_clear_of_the_obstacles_at_their_time():

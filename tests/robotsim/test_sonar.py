@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from robotsim.errors import RobotsimError
+from robotsim.sensors import sonar
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances, simulate_readings
 
 
@@ -192,3 +193,52 @@ def test_turning_faults_on_leaves_the_fault_free_readings_unchanged():
     )
     assert fault.any()
     np.testing.assert_array_equal(clean[~fault], faulty[~fault])
+
+
+def _segment_by_segment(poses, segments, *args):
+    """The cone distances as the minimum of one-segment maps (each computed whole)."""
+    return np.min(
+        [cone_distances(poses, segments[j : j + 1], *args) for j in range(len(segments))], axis=0
+    )
+
+
+@pytest.mark.parametrize("layout", ["clutter", "far"])
+def test_a_large_map_looked_at_nearest_first_gives_the_whole_maps_distances(layout, monkeypatch):
+    """Maps above LARGE_MAP_SEGMENTS take the nearest-first path; its distances equal the
+    minimum over one-segment maps bit for bit, both where the nearest segments settle most
+    cones (clutter in a room) and where most cones look past them (a far cluster and nothing
+    else: far echoes and none, computed again over the whole map)."""
+    rng = np.random.default_rng(11 if layout == "clutter" else 12)
+    room = np.array(
+        [[[0, 0], [40, 0]], [[40, 0], [40, 40]], [[40, 40], [0, 40]], [[0, 40], [0, 0]]]
+    )
+    if layout == "clutter":
+        centres = rng.uniform(0.0, 12.0, (300, 2))
+        poses = np.column_stack([rng.uniform(1, 11, (40, 2)), rng.uniform(-4, 4, 40)])
+        walls = room.astype(float)
+    else:
+        centres = rng.uniform(0.0, 3.0, (300, 2))
+        poses = np.column_stack([rng.uniform(20, 38, (40, 2)), rng.uniform(-4, 4, 40)])
+        walls = np.zeros((0, 2, 2))
+    segments = np.concatenate([centres[:, None, :] + rng.uniform(-0.4, 0.4, (300, 2, 2)), walls])
+    assert len(segments) > sonar.LARGE_MAP_SEGMENTS
+    belt = SonarBeltParams.default_belt()
+    args = (belt.mount_xy, belt.mount_angle_rad, belt.half_aperture_rad)
+    settled, again = [], []  # cones computed among the nearest only, and over the whole map
+    real = sonar._Cones.distances
+
+    def counting(cones, index, a, e):
+        (again if isinstance(index, tuple) else settled).append(
+            len(index[0]) if isinstance(index, tuple) else a.shape[-2]
+        )
+        return real(cones, index, a, e)
+
+    monkeypatch.setattr(sonar._Cones, "distances", counting)
+    got = cone_distances(poses, segments, *args)
+    monkeypatch.undo()
+    assert settled == [sonar.NEAR_SEGMENTS] and sum(again) > 0
+    if layout == "clutter":
+        assert sum(again) < 0.2 * got.size
+    else:
+        assert sum(again) > 0.5 * got.size
+    np.testing.assert_array_equal(got, _segment_by_segment(poses, segments, *args))

@@ -9,6 +9,9 @@ import itertools
 import numpy as np
 import pytest
 
+from robotsim.sensors.sonar import readings_from_draws
+from robotsim.simulation import SensorNoise
+from scenarios.epochs import EpochLog
 from scenarios.metrics import WAYPOINT_REACHED_M, route_stats
 from scenarios.pipeline import FUSED, Steering, estimate, gathered, localizer_for
 from scenarios.runner import run_scenario, simulate_spec
@@ -58,6 +61,16 @@ def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
     online, _ = gathered(localizer, log)
     after, _ = estimate(spec, log)
     np.testing.assert_array_equal(online.pose, after.pose)
+    # the epoch log reuses the fusion's components: the same as computing them all again
+    records = localizer.epochs
+    assert any(r.components is not None for r in records)
+    again = EpochLog.collect(
+        online.epochs.t_s,
+        [r.result for r in records],
+        log.sonar_pose[np.searchsorted(log.sonar_t_s, online.epochs.t_s)],
+    )
+    np.testing.assert_array_equal(online.epochs.labels, again.labels)
+    np.testing.assert_array_equal(online.epochs.components, again.components)
     # the controller was fed the fused estimate at its ticks (every 10 samples at 10 Hz), one
     # sample late (the first: the start pose)
     stride = spec.control_stride
@@ -69,6 +82,31 @@ def test_the_loop_hands_over_the_logged_readings_and_steers_on_the_estimate():
     # and it matters: the true path differs from the run steered on the truth
     truth = simulate_spec(dataclasses.replace(spec, follow=Follow.TRUTH))
     assert not np.array_equal(truth.pose, log.pose)
+
+
+def test_the_closed_loops_sonar_log_is_the_whole_run_pass_on_its_poses():
+    """The closed loop logs the scans it computed as they came; they equal the vectorised
+    pass over the whole run at the logged poses and times (the walls, the armchair and the
+    walking person of apartment_lived_in, the error model from the same draws)."""
+    spec = closed("apartment_lived_in", Follow.ESTIMATE, seed=4, duration_s=30.0)
+    log = simulate_spec(spec, observer=Steering(localizer_for(spec), FUSED))
+    belt = spec.sensors.sonar
+    true_range = spec.obstacles.cone_distances(
+        log.sonar_pose,
+        log.sonar_t_s,
+        spec.map.segments,
+        belt.mount_xy,
+        belt.mount_angle_rad,
+        belt.half_aperture_rad,
+    )
+    np.testing.assert_array_equal(log.sonar_true_range_m, true_range)
+    noise = SensorNoise.draw(
+        len(log.t_s), len(log.sonar_t_s), log.sensors, log.rate_hz, np.random.default_rng(4)
+    )
+    readings, fault = readings_from_draws(true_range, belt, noise.sonar)
+    np.testing.assert_array_equal(log.sonar_range_m, readings)
+    np.testing.assert_array_equal(log.sonar_fault, fault)
+    assert np.isfinite(readings).any() and fault.any() == (belt.outlier_prob > 0)
 
 
 @pytest.mark.slow
