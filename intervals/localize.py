@@ -239,6 +239,17 @@ def _pave(
             keep[idx] = rejects[idx] <= q
         return keep, rejects
 
+    def contracted(b):
+        # boxes meeting no region of ``within`` are OUTSIDE whatever the contractor would
+        # make of them: emptied (NaN rows, dropped by SIVIA) before the rest is contracted
+        if within is None:
+            return contractor.contract(b, local, q)
+        out = np.full(b.shape, np.nan)
+        meets = meets_any(b, within)
+        if meets.any():
+            out[meets] = contractor.contract(b[meets], local, q)
+        return out
+
     paving = sivia(
         test,
         boxes,
@@ -248,7 +259,7 @@ def _pave(
         splits_per_level=splits_per_level,
         min_level_boxes=MIN_LEVEL_BOXES,
         max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
-        contract=(lambda b: contractor.contract(b, local, q)) if contract else None,
+        contract=contracted if contract else None,
     )
     kept_cap = max_boxes if max_kept is None else max_kept
     over = max_boxes is not None and paving.outer.shape[0] > kept_cap

@@ -14,7 +14,8 @@ from enum import IntEnum
 
 import numpy as np
 
-from intervals.boxes import Subpaving, as_boxes, bisect, max_width
+from intervals.bisection import split_rounds
+from intervals.boxes import Subpaving, as_boxes, max_width
 from intervals.errors import IntervalError
 
 
@@ -71,20 +72,12 @@ def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
 
 def _split(boxes: np.ndarray, eps: float, scale, times: int, grouped: bool = False) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
-    rounds in all (``grouped``: the children in the order of their parents)."""
-    done, todo = [], boxes
-    parents, todo_parents = [], np.arange(boxes.shape[0])
-    for _ in range(times):
-        left, right = bisect(todo, scale)
-        children = np.concatenate([left, right], axis=0)
-        owners = np.concatenate([todo_parents, todo_parents])
-        wide = max_width(children, scale) > eps
-        done.append(children[~wide])
-        parents.append(owners[~wide])
-        todo, todo_parents = children[wide], owners[wide]
-    out = np.concatenate([*done, todo], axis=0)
+    rounds in all (``grouped``: the children in the order of their parents), in one compiled
+    call (:func:`intervals.bisection.split_rounds`)."""
+    scale = np.ones(boxes.shape[1]) if scale is None else scale
+    out, parents = split_rounds(np.ascontiguousarray(boxes), float(eps), scale, int(times))
     if grouped:
-        out = out[np.argsort(np.concatenate([*parents, todo_parents]), kind="stable")]
+        out = out[np.argsort(parents, kind="stable")]
     return out
 
 

@@ -64,6 +64,7 @@ whole circle.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numba
@@ -283,6 +284,12 @@ def contract_into(
     cos_theta,
     sin_theta,
     segments,
+    allowed,
+    grid_origin,
+    grid_cell_m,
+    grid_shape,
+    grid_starts,
+    grid_members,
     ranges,
     kind,
     belt,
@@ -294,9 +301,12 @@ def contract_into(
     """Contract every box of ``boxes (N, 3, 2)`` into ``out (N, 3, 2)`` (module doc).
 
     ``cos_theta, sin_theta (N, 2)``: of the heading bounds (:func:`intervals.sonar.cone.heading_trig`);
-    ``segments (M, 2, 2)``: the scan's (those within reach of the boxes,
-    :meth:`intervals.sonar.scan.SonarScan.restricted_to`), each skipped unless its bounding box
-    meets the hull of the hit boxes;
+    ``segments (M, 2, 2)``: the scene's, of which only those with ``allowed (M,)`` take part
+    (the scan's, within reach of the boxes, :meth:`intervals.sonar.scan.SonarScan.restricted_to`),
+    looked up in the scene's grid (``grid_origin (2,)``, ``grid_cell_m``, ``grid_shape (2,)``
+    int64, ``grid_starts``, ``grid_members``, :class:`intervals.sonar.segment_grid.SegmentGrid`)
+    in the cells the hull of the hit boxes meets, each skipped unless its bounding box meets
+    that hull;
     ``ranges (k, 2)``, ``kind (k,)``: the scan's reading intervals; ``belt (k, 8)``: the belt's
     kernel table; ``params``: see :func:`_forward_rows`; ``q``: the relaxation; ``passes``:
     forward-backward passes. An empty result row is all NaN.
@@ -313,10 +323,14 @@ def contract_into(
         out[:, :, :] = boxes
         return
     work = np.empty((3, 2))
+    nx, ny = grid_shape[0], grid_shape[1]
+    seen = np.zeros(segments.shape[0], dtype=np.int64)  # stamp of the last pass that met it
+    stamp = 0
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
         empty = False
         for _ in range(passes):
+            stamp += 1
             hx_lo, hx_hi, hy_lo, hy_hi = _forward_rows(
                 work, cos_theta[n], sin_theta[n], belt, ranges, kind, params, rows
             )
@@ -328,18 +342,32 @@ def contract_into(
                 done[i] = not (kind[i] == ECHO and ranges[i, 0] <= ranges[i, 1])
                 remaining += 1 if kind[i] == ECHO else 0
             if hx_lo <= hx_hi:  # some echo: the segments whose bounding box meets a hit box
-                for j in range(segments.shape[0]):
+                # only a segment with a point in some Q_i (so in their hull) can widen an A_i;
+                # the grid registers it in that point's cell, inside the hull's cell range
+                # widened by one (intervals.sonar.segment_grid): each visited once a pass
+                ix0 = max(math.floor((hx_lo - grid_origin[0]) / grid_cell_m) - 1, 0)
+                ix1 = min(math.floor((hx_hi - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
+                iy0 = max(math.floor((hy_lo - grid_origin[1]) / grid_cell_m) - 1, 0)
+                iy1 = min(math.floor((hy_hi - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+                for ix in range(ix0, ix1 + 1):
                     if remaining <= q:
                         break
-                    ax, ay = segments[j, 0, 0], segments[j, 0, 1]
-                    bx, by = segments[j, 1, 0], segments[j, 1, 1]
-                    if max(ax, bx) < hx_lo or min(ax, bx) > hx_hi:
-                        continue
-                    if max(ay, by) < hy_lo or min(ay, by) > hy_hi:
-                        continue
-                    remaining -= _segment_backward(
-                        ax, ay, bx - ax, by - ay, work, rows, done, guard_m
-                    )
+                    for member in range(grid_starts[ix * ny + iy0], grid_starts[ix * ny + iy1 + 1]):
+                        if remaining <= q:
+                            break
+                        j = grid_members[member]
+                        if seen[j] == stamp or not allowed[j]:
+                            continue
+                        seen[j] = stamp
+                        ax, ay = segments[j, 0, 0], segments[j, 0, 1]
+                        bx, by = segments[j, 1, 0], segments[j, 1, 1]
+                        if max(ax, bx) < hx_lo or min(ax, bx) > hx_hi:
+                            continue
+                        if max(ay, by) < hy_lo or min(ay, by) > hy_hi:
+                            continue
+                        remaining -= _segment_backward(
+                            ax, ay, bx - ax, by - ay, work, rows, done, guard_m
+                        )
             b = _relaxed_bounds(rows, kind, work, q, lows, highs)
             if not (b[0] <= b[1] and b[2] <= b[3]):
                 empty = True
@@ -385,11 +413,19 @@ def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -
         ]
     )
     cos_theta, sin_theta = heading_trig(boxes)
+    assert scan.scene is not None
+    grid = scan.scene.grid
     contract_into(
         boxes,
         np.ascontiguousarray(cos_theta),
         np.ascontiguousarray(sin_theta),
-        np.ascontiguousarray(scan.segments),
+        scan.scene.segments,
+        scan.allowed,
+        grid.origin,
+        grid.cell_m,
+        np.array(grid.shape, dtype=np.int64),
+        grid.starts,
+        grid.members,
         scan.ranges,
         scan.kind,
         belt.kernel_table,

@@ -18,6 +18,7 @@ into a :class:`SonarScan`, the input of every box test (:mod:`intervals.sonar.co
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -304,11 +305,10 @@ class SonarScan:
         a, e = seg[:, 0], seg[:, 1] - seg[:, 0]
         gap = segment_box_gap(a[:, 0], a[:, 1], e[:, 0], e[:, 1], *centre, *half)
         ids = ids[gap <= reach]
-        return SonarScan(
-            self.scene.segments[ids],
-            self.belt,
-            self.readings_m,
-            self.boundary,
-            scene=self.scene,
-            segment_ids=ids,
-        )
+        # the same readings: their intervals, kinds and reach are this scan's (validated and
+        # computed once), only the segments (and the mask derived from them) change
+        restricted = copy.copy(self)
+        restricted.__dict__.pop("allowed", None)
+        object.__setattr__(restricted, "segments", self.scene.segments[ids])
+        object.__setattr__(restricted, "segment_ids", ids)
+        return restricted

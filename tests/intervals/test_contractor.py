@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 import shapely
 
+from intervals import localize as localize_module
 from intervals.boxes import volume
 from intervals.errors import IntervalError
-from intervals.localize import box_test, gomne, localize
+from intervals.localize import box_test, gomne, localize, meets_any
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 from intervals.sonar.contractor import contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -246,3 +247,36 @@ def test_localize_and_gomne_with_the_contractor_keep_the_truth_in_smaller_sets()
         localize(scan, prior, 0.05, contract=1)  # type: ignore[arg-type]
     with pytest.raises(IntervalError, match="shave_rounds must be"):
         localize(scan, prior, 0.05, shave_rounds=-1)
+
+
+def test_boxes_outside_every_region_of_within_are_never_contracted(monkeypatch):
+    """GOMNE with ``within`` (the tracker's predicted components): the contractor only ever
+    sees boxes meeting some region (the others are OUTSIDE, dropped before it), the set holds
+    the truth and lies in the regions, and fewer boxes are contracted than without them."""
+    rng = np.random.default_rng(12)
+    seen: list[np.ndarray] = []
+
+    def recording(boxes, scan, q=0, passes=2):
+        seen.append(np.array(boxes))
+        return contract(boxes, scan, q, passes)
+
+    monkeypatch.setattr(localize_module.contractor, "contract", recording)
+    for case in range(6):
+        scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=case % 2 == 0)
+        prior = np.stack([truth - [1.0, 1.0, 0.4], truth + [1.0, 1.0, 0.4]], axis=-1)
+        elsewhere = truth + rng.uniform(-0.7, 0.7, 3) * [1.0, 1.0, 0.3]
+        regions = np.stack(
+            [
+                np.stack([c - [0.15, 0.15, 0.08], c + [0.15, 0.15, 0.08]], -1)
+                for c in (truth, elsewhere)
+            ]
+        )
+        seen.clear()
+        found = gomne(scan, prior, 0.05, q_max=1, within=regions)
+        assert found.consistent and found.paving.contains(truth[None])[0]
+        assert meets_any(found.paving.outer, regions).all()
+        contracted = np.concatenate(seen)
+        assert meets_any(contracted, regions).all()
+        seen.clear()
+        gomne(scan, prior, 0.05, q_max=1)
+        assert contracted.shape[0] < np.concatenate(seen).shape[0]

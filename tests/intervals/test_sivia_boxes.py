@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from intervals import boxes as bx
 from intervals import interval as ia
+from intervals.bisection import split_rounds
 from intervals.errors import IntervalError
 from intervals.imagesp import imagesp, unique_rows
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
@@ -156,6 +157,50 @@ def test_bisect_scaled_axis_and_union():
     left, right = bx.bisect(box, bx.pose_scale(0.5))
     assert left[0, 0, 1] == 0.5
     assert bx.volume(np.concatenate([left, right])) == pytest.approx(bx.volume(box))
+
+
+def _numpy_split_rounds(boxes, eps, scale, times):
+    """The bisection rounds as numpy passes (what SIVIA ran before the compiled call): each
+    round every left child, then every right child; the narrow ones set aside in round
+    order, the still wide ones last; with the row of the parent of each."""
+    done, parents, todo, owners = [], [], boxes, np.arange(boxes.shape[0])
+    for _ in range(times):
+        left, right = bx.bisect(todo, scale)
+        children, owners = np.concatenate([left, right]), np.concatenate([owners, owners])
+        wide = bx.max_width(children, scale) > eps
+        done.append(children[~wide])
+        parents.append(owners[~wide])
+        todo, owners = children[wide], owners[wide]
+    return np.concatenate([*done, todo]), np.concatenate([*parents, owners])
+
+
+def test_compiled_bisection_rounds_give_the_numpy_rounds_children_in_order():
+    """``split_rounds`` against the numpy rounds on random boxes of 1 to 4 dimensions whose
+    widths tie often (the first widest axis is cut): the same children bit for bit, in the same
+    order, with the same parents; each child lies in its parent and the children of a parent
+    fill it (volumes add up)."""
+    rng = np.random.default_rng(8)
+    checked = 0
+    for _ in range(200):
+        n, d = int(rng.integers(1, 120)), int(rng.integers(1, 5))
+        lo = rng.uniform(-5, 5, (n, d))
+        width = rng.choice([0.05, 0.1, 0.2, 0.7, 1.3], (n, d)) * rng.choice([1.0, 0.5], (n, d))
+        boxes = np.stack([lo, lo + width], axis=-1)
+        scale = rng.choice([0.5, 1.0, 2.0], d)
+        eps = float(rng.choice([0.049, 0.1, 0.3]))
+        boxes = boxes[bx.max_width(boxes, scale) > eps]
+        if boxes.shape[0] == 0:
+            continue
+        for times in (1, 3, 6):
+            children, parents = split_rounds(boxes, eps, scale, times)
+            expected, expected_parents = _numpy_split_rounds(boxes, eps, scale, times)
+            np.testing.assert_array_equal(children, expected)
+            np.testing.assert_array_equal(parents, expected_parents)
+            assert bx.contains_boxes(boxes[parents], children).all()
+            sums = np.bincount(parents, np.prod(bx.widths(children), axis=1), boxes.shape[0])
+            np.testing.assert_allclose(sums, np.prod(bx.widths(boxes), axis=1), rtol=1e-12)
+            checked += children.shape[0]
+    assert checked > 10_000
 
 
 def test_area_xy_matches_shapely_union():
