@@ -150,12 +150,12 @@ def entry_arrays(mean: np.ndarray, cov: np.ndarray, noise: np.ndarray, args: tup
     writable), the outputs new.
     """
     runs = runs_of(mean)
-    noise = per_run(noise, runs)
+    noise_b = per_run(noise, runs)
     packed = pack_args(args, mean.shape[:-1])
-    if runs == 0 or noise is None or packed is None:
+    if runs == 0 or noise_b is None or packed is None:
         return None
     if z is not None:
-        m = noise.shape[-1]
+        m = noise_b.shape[-1]
         if (
             not isinstance(z, np.ndarray)
             or z.shape != mean.shape[:-1] + (m,)
@@ -169,7 +169,7 @@ def entry_arrays(mean: np.ndarray, cov: np.ndarray, noise: np.ndarray, args: tup
         read_only(cov.reshape(runs, n, n)),
         z,
         packed,
-        noise,
+        noise_b,
         (np.empty((runs, n)), np.empty((runs, n, n))),
     )
 
