@@ -182,7 +182,7 @@ def test_the_work_array_is_carved_to_its_last_entry(name, noise):
     for lean in filters:
         work, layout = lean._work, lean._layout
         start = lean_module._constants(work, layout)[-1]
-        start = lean_module._beliefs(work, start, n)[-1]
+        start = lean_module._state(work, start, n)[-1]
         if isinstance(lean, LeanUKF):
             end = lean_module.ukf_scratch(work, start, n, m, q)[-1]
         else:
