@@ -175,7 +175,7 @@ def test_the_work_array_is_carved_to_its_last_entry(name, noise):
     """The Python length of the work array and the compiled views of it agree: the views tile
     it, none past its end and none short of it."""
     process, measurement, belief, _ = _problem(name, noise)
-    filters = [LeanUKF(UKF, process, measurement, belief, DT_S)]
+    filters: list[LeanUKF | LeanEKF] = [LeanUKF(UKF, process, measurement, belief, DT_S)]
     if noise == ProcessNoise.ADDITIVE:
         filters.append(LeanEKF(process, measurement, belief, DT_S))
     n, m, q = belief.mean.shape[0], measurement.R.shape[0], process.Q.shape[0]
