@@ -10,9 +10,9 @@ said otherwise:
 - lean: :class:`localization.compiled.lean.LeanUKF`, ``lean.step(z)`` from a Python loop;
 - bare: the floor of any Python-called compiled step, a ``numba.njit`` function of three
   arrays ``(mean, cov, z)`` with everything else compiled in as constants, calling the same
-  cores (``localization.compiled.ukf.predict_core`` and ``update_core`` with the CTRV and
-  pose kernels) and checking nothing, from the same kind of loop; target (issue 17): lean at
-  most 5 us and at most 1.5 times bare;
+  per-run functions (``localization.compiled.ukf.predict_run`` and ``update_run`` with the
+  CTRV and pose kernels; their scratch allocated in the call) and returning no status, from
+  the same kind of loop; target (issue 17): lean at most 5 us and at most 1.5 times bare;
 - lean run: ``lean.run(zs)``, the whole sequence in one call, per step;
 - filter step: ``UnscentedKalmanFilter.predict`` + ``update`` on immutable beliefs (its
   compiled path), one filter and a batch of ``--batch`` runs (per run-step);
@@ -42,7 +42,7 @@ from _common import machine_line, markdown_table
 
 from localization.compiled import motion
 from localization.compiled.lean import LeanUKF
-from localization.compiled.ukf import predict_core, update_core
+from localization.compiled.ukf import predict_run, predict_scratch, update_run, update_scratch
 from localization.gaussian import Gaussian
 from localization.models import MeasurementModel, ProcessModel
 from localization.motion_models import CTRV, pose_model
@@ -63,20 +63,32 @@ difference grows along a run (2e-8 after 2000 steps), so it is checked over the 
 UKF = UnscentedKalmanFilter(ScaledSigmaPoints(alpha=1e-3, beta=2.0, kappa=0.0))
 
 # the bare step's constants, compiled in (numba freezes global arrays)
-_ARGS = np.array([[DT_S]])
-_Q = Q[None].copy()
-_R = R[None].copy()
+_ARGS = np.array([DT_S])
+_Q = Q.copy()
+_R = R.copy()
 _WEIGHTS = np.array(UKF.points.weights(5).packed)
 _ANGLES = np.array([2], dtype=np.int64)
 
 
 @numba.njit
 def bare_step(mean, cov, z) -> None:
-    """One CTRV UKF step of ``mean (1, 5)``, ``cov (1, 5, 5)`` (overwritten) by ``z (1, 3)``:
-    the compiled cores with constant models and settings, no checks, no status."""
-    prior_mean, prior_cov = np.empty((1, 5)), np.empty((1, 5, 5))
-    predict_core(motion.ctrv_point, mean, cov, _ARGS, _Q, _WEIGHTS, _ANGLES, prior_mean, prior_cov)
-    update_core(
+    """One CTRV UKF step of ``mean (5,)``, ``cov (5, 5)`` (overwritten) by ``z (3,)``: the
+    compiled per-run cores with constant models and settings, no status, its scratch
+    allocated per call."""
+    prior_mean, prior_cov = np.empty(5), np.empty((5, 5))
+    predict_run(
+        motion.ctrv_point,
+        mean,
+        cov,
+        _ARGS,
+        _Q,
+        _WEIGHTS,
+        _ANGLES,
+        prior_mean,
+        prior_cov,
+        predict_scratch(5, 5),
+    )
+    update_run(
         motion.leading_entries_point,
         prior_mean,
         prior_cov,
@@ -88,6 +100,7 @@ def bare_step(mean, cov, z) -> None:
         _ANGLES,
         mean,
         cov,
+        update_scratch(5, 3),
     )
 
 
@@ -133,11 +146,10 @@ def lean_run(zs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bare_loop(zs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    mean, cov = MEAN[None].copy(), COV[None].copy()
-    rows = zs[:, None, :].copy()
-    for z in rows:
+    mean, cov = MEAN.copy(), COV.copy()
+    for z in zs:
         bare_step(mean, cov, z)
-    return mean[0], cov[0]
+    return mean, cov
 
 
 def filter_loop(zs: np.ndarray, models=None, batch: int | None = None):

@@ -26,11 +26,13 @@ with ``sym(M) = (M + M^T) / 2``. Kernel conventions (the per-point kernels of
 ``H(x (n,), args (k,), out (m, n))``, with ``args`` the step's arguments packed as floats
 (:func:`localization.compiled.glue.pack_args`).
 
-Entries. The cores take the kernels as arguments and are called only from other compiled
-functions; the entries Python calls are module-level and cached on disk for the built-in
-kernels (one prediction entry switches between the four motion models by their number in
-:data:`BUILTIN_PROCESS_KERNELS`); a user's own kernels get an uncached entry, built once per
-pair of kernels (:func:`predict_entry`, :func:`update_entry`).
+Entries. As in :mod:`localization.compiled.ukf`: each step is written once for one run
+(:func:`predict_run`, :func:`update_run`, kernels and scratch passed in), a batch loops a run
+function over its runs (:func:`batched_predict`, :func:`batched_update`), the lean EKF calls
+the run functions on its own scratch; the entries Python calls are module-level and cached on
+disk for the built-in kernels (one prediction entry switches between the four motion models by
+their number in :data:`BUILTIN_PROCESS_KERNELS`); a user's own kernels get an uncached entry,
+built once per pair of kernels (:func:`predict_entry`, :func:`update_entry`).
 
 Status codes, array conventions and the Python-side helpers are those of
 :mod:`localization.compiled.glue`: ``OK``, ``NOT_POSITIVE_DEFINITE`` (``S``) or ``NOT_FINITE``
@@ -52,11 +54,7 @@ from localization.compiled.glue import (
     OK,
     angle_array,
     call_entry,
-    pack_args,
-    per_run,
-    read_only,
-    runs_of,
-    writable,
+    entry_arrays,
 )
 from localization.compiled.linalg import (
     all_finite,
@@ -86,114 +84,195 @@ def _sandwich(left, middle, temp, out) -> None:
             out[i, j] = total
 
 
-@numba.njit
-def predict_core(f, jac_f, mean, cov, args, q_cov, angles, out_mean, out_cov) -> int:
-    """EKF prediction of every run (module docstring), ``f(x, args, out)``, ``F(x, args, out)``.
+# As in localization.compiled.ukf: each step is written once per run (``*_run``, scratch passed
+# in), the batched cores loop a run function ``run(selector, x, P, ...)`` over the runs, the
+# lean entries call the run functions on the filter's own scratch.
 
-    ``mean (B, n)``, ``cov (B, n, n)``, ``args (B or 1, k)``, ``q_cov (B or 1, n, n)``,
-    ``angles`` the state's angle indices (int64); writes ``out_mean (B, n)``,
-    ``out_cov (B, n, n)``. Returns a status code.
+
+@numba.njit
+def predict_scratch(n):
+    """Scratch of a prediction of ``n`` states: ``(point (n,), jac (n, n), temp (n, n))``."""
+    return np.empty(n), np.empty((n, n)), np.empty((n, n))
+
+
+@numba.njit
+def update_scratch(n, m):
+    """Scratch of an update of ``n`` states by ``m`` measurements: ``(point (n,), z_pred (m,),
+    innovation (m,), jac (m, n), cross (n, m), s_cov (m, m), s_chol (m, m), gain_t (m, n),
+    gain (n, m), joseph (n, n), temp (n, n), noise_part (n, n), temp_noise (n, m))``."""
+    return (
+        np.empty(n),
+        np.empty(m),
+        np.empty(m),
+        np.empty((m, n)),
+        np.empty((n, m)),
+        np.empty((m, m)),
+        np.empty((m, m)),
+        np.empty((m, n)),
+        np.empty((n, m)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, m)),
+    )
+
+
+@numba.njit
+def predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, scratch) -> int:
+    """EKF prediction of one run (module docstring), ``f(x, args, out)``, ``F(x, args, out)``.
+
+    ``x (n,)``, ``prior (n, n)``, ``step_args (k,)``, ``q (n, n)``, ``angles`` the state's
+    angle indices (int64), ``scratch`` of :func:`predict_scratch`; writes ``new_mean (n,)``,
+    ``new_cov (n, n)``. Returns a status code.
     """
-    runs, n = mean.shape
-    if not all_finite(args):
+    point, jac, temp = scratch
+    n = x.shape[0]
+    point[:] = x
+    jac_f(point, step_args, jac)
+    point[:] = x
+    f(point, step_args, new_mean)
+    for a in angles:
+        new_mean[a] = wrap_angle(new_mean[a])
+    _sandwich(jac, prior, temp, new_cov)  # (F P) F^T
+    for i in range(n):
+        for j in range(n):
+            new_cov[i, j] += q[i, j]
+    symmetrise_in_place(new_cov)
+    if not (all_finite(new_mean) and all_finite(new_cov)):
         return NOT_FINITE
-    point = np.empty(n)
-    jac = np.empty((n, n))
-    temp = np.empty((n, n))
-    for b in range(runs):
-        step_args = args[b if args.shape[0] > 1 else 0]
-        point[:] = mean[b]
-        jac_f(point, step_args, jac)
-        point[:] = mean[b]
-        new_mean = out_mean[b]
-        f(point, step_args, new_mean)
-        for a in angles:
-            new_mean[a] = wrap_angle(new_mean[a])
-        new_cov = out_cov[b]
-        _sandwich(jac, cov[b], temp, new_cov)  # (F P) F^T
-        q = q_cov[b if q_cov.shape[0] > 1 else 0]
-        for i in range(n):
-            for j in range(n):
-                new_cov[i, j] += q[i, j]
-        symmetrise_in_place(new_cov)
-        if not (all_finite(new_mean) and all_finite(new_cov)):
-            return NOT_FINITE
     return OK
 
 
 @numba.njit
-def update_core(
-    h, jac_h, mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov
+def update_run(
+    h, jac_h, x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, scratch
 ) -> int:
-    """EKF update of every run in Joseph form (module docstring), ``h(x, args, out)``, ``H(x, args, out)``.
+    """EKF update of one run in Joseph form (module docstring), ``h(x, args, out)``, ``H(x, args, out)``.
 
-    ``mean (B, n)``, ``cov (B, n, n)``, ``z (B, m)``, ``args (B or 1, k)``,
-    ``r_cov (B or 1, m, m)``, ``state_angles`` and ``angles`` (the measurement's) angle
-    indices (int64); writes ``out_mean (B, n)``, ``out_cov (B, n, n)``. Returns a status code.
+    ``x (n,)``, ``prior (n, n)``, ``z (m,)``, ``step_args (k,)``, ``r (m, m)``,
+    ``state_angles`` and ``angles`` (the measurement's) angle indices (int64), ``scratch`` of
+    :func:`update_scratch`; writes ``new_mean (n,)``, ``new_cov (n, n)``. Returns a status code.
     """
-    runs, n = mean.shape
-    m = z.shape[1]
-    if not (all_finite(args) and all_finite(z)):
+    (
+        point,
+        z_pred,
+        innovation,
+        jac,
+        cross,
+        s_cov,
+        s_chol,
+        gain_t,
+        gain,
+        joseph,
+        temp,
+        noise_part,
+        temp_noise,
+    ) = scratch
+    n, m = x.shape[0], z.shape[0]
+    if not all_finite(z):
         return NOT_FINITE
-    point = np.empty(n)
-    z_pred = np.empty(m)
-    innovation = np.empty(m)
-    jac = np.empty((m, n))
-    cross = np.empty((n, m))
-    s_cov = np.empty((m, m))
-    s_chol = np.empty((m, m))
-    gain_t = np.empty((m, n))
-    gain = np.empty((n, m))
-    joseph = np.empty((n, n))
-    temp = np.empty((n, n))
-    noise_part = np.empty((n, n))
-    temp_noise = np.empty((n, m))
-    for b in range(runs):
-        step_args = args[b if args.shape[0] > 1 else 0]
-        x = mean[b]
-        prior = cov[b]
-        r = r_cov[b if r_cov.shape[0] > 1 else 0]
-        point[:] = x
-        h(point, step_args, z_pred)
+    point[:] = x
+    h(point, step_args, z_pred)
+    for c in range(m):
+        innovation[c] = z[c] - z_pred[c]
+    for a in angles:
+        innovation[a] = wrap_angle(innovation[a])
+    point[:] = x
+    jac_h(point, step_args, jac)
+    if not kalman_gain_t(prior, jac, r, cross, s_cov, s_chol, gain_t):  # K^T = S^-1 (P H^T)^T
+        return NOT_POSITIVE_DEFINITE
+    for i in range(n):  # x+ = x + K y
+        total = 0.0
         for c in range(m):
-            innovation[c] = z[b, c] - z_pred[c]
-        for a in angles:
-            innovation[a] = wrap_angle(innovation[a])
-        point[:] = x
-        jac_h(point, step_args, jac)
-        if not kalman_gain_t(prior, jac, r, cross, s_cov, s_chol, gain_t):  # K^T = S^-1 (P H^T)^T
-            return NOT_POSITIVE_DEFINITE
-        new_mean = out_mean[b]
-        for i in range(n):  # x+ = x + K y
+            total += gain_t[c, i] * innovation[c]
+        new_mean[i] = x[i] + total
+        for c in range(m):
+            gain[i, c] = gain_t[c, i]
+    for a in state_angles:
+        new_mean[a] = wrap_angle(new_mean[a])
+    for i in range(n):  # A = I - K H
+        for j in range(n):
             total = 0.0
             for c in range(m):
-                total += gain_t[c, i] * innovation[c]
-            new_mean[i] = x[i] + total
-            for c in range(m):
-                gain[i, c] = gain_t[c, i]
-        for a in state_angles:
-            new_mean[a] = wrap_angle(new_mean[a])
-        for i in range(n):  # A = I - K H
-            for j in range(n):
-                total = 0.0
-                for c in range(m):
-                    total += gain[i, c] * jac[c, j]
-                joseph[i, j] = (1.0 if i == j else 0.0) - total
-        new_cov = out_cov[b]
-        _sandwich(joseph, prior, temp, new_cov)  # (A P) A^T
-        _sandwich(gain, r, temp_noise, noise_part)  # (K R) K^T
-        for i in range(n):
-            for j in range(n):
-                new_cov[i, j] += noise_part[i, j]
-        symmetrise_in_place(new_cov)
-        if not (all_finite(new_mean) and all_finite(new_cov)):
-            return NOT_FINITE
+                total += gain[i, c] * jac[c, j]
+            joseph[i, j] = (1.0 if i == j else 0.0) - total
+    _sandwich(joseph, prior, temp, new_cov)  # (A P) A^T
+    _sandwich(gain, r, temp_noise, noise_part)  # (K R) K^T
+    for i in range(n):
+        for j in range(n):
+            new_cov[i, j] += noise_part[i, j]
+    symmetrise_in_place(new_cov)
+    if not (all_finite(new_mean) and all_finite(new_cov)):
+        return NOT_FINITE
     return OK
+
+
+def batched_predict(run):
+    """The compiled EKF prediction of every run of a batch by ``run`` (a call of
+    :func:`predict_run`, ``run(selector, x, P, ...)``): ``core(selector, mean (B, n),
+    cov (B, n, n), args (B or 1, k), q_cov (B or 1, n, n), angles, out_mean (B, n),
+    out_cov (B, n, n))``; returns a status code. A factory for the reason of
+    :func:`localization.compiled.ukf.batched_predict`."""
+
+    @numba.njit
+    def core(selector, mean, cov, args, q_cov, angles, out_mean, out_cov) -> int:
+        runs, n = mean.shape
+        if not all_finite(args):
+            return NOT_FINITE
+        scratch = predict_scratch(n)
+        for b in range(runs):
+            status = run(
+                selector,
+                mean[b],
+                cov[b],
+                args[b if args.shape[0] > 1 else 0],
+                q_cov[b if q_cov.shape[0] > 1 else 0],
+                angles,
+                out_mean[b],
+                out_cov[b],
+                scratch,
+            )
+            if status != OK:
+                return status
+        return OK
+
+    return core
+
+
+def batched_update(run):
+    """As :func:`batched_predict` for an update (``run(x, P, z, ...)`` a call of
+    :func:`update_run`): ``core(mean, cov, z (B, m), args, r_cov (B or 1, m, m), state_angles,
+    angles, out_mean, out_cov)``."""
+
+    @numba.njit
+    def core(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov) -> int:
+        runs, n = mean.shape
+        if not all_finite(args):
+            return NOT_FINITE
+        scratch = update_scratch(n, z.shape[1])
+        for b in range(runs):
+            status = run(
+                mean[b],
+                cov[b],
+                z[b],
+                args[b if args.shape[0] > 1 else 0],
+                r_cov[b if r_cov.shape[0] > 1 else 0],
+                state_angles,
+                angles,
+                out_mean[b],
+                out_cov[b],
+                scratch,
+            )
+            if status != OK:
+                return status
+        return OK
+
+    return core
 
 
 # ------------------------------------------------------------------- cached built-in entries
 # As in localization.compiled.ukf: module-level entries (cached on disk), kernels named as
-# module attributes so that numba resolves them to constants.
+# module attributes so that numba resolves them to constants, no function arguments.
 
 #: The built-in process kernels ``(f, F)``, by the number :func:`predict_builtin` switches on.
 BUILTIN_PROCESS_KERNELS = (
@@ -204,72 +283,48 @@ BUILTIN_PROCESS_KERNELS = (
 )
 
 
+@numba.njit
+def builtin_predict_run(model, x, prior, step_args, q, angles, new_mean, new_cov, s):
+    """:func:`predict_run` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    if model == 0:
+        f, jac_f = motion.cv_point, motion.cv_jacobian_point
+        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+    if model == 1:
+        f, jac_f = motion.ctrv_point, motion.ctrv_jacobian_point
+        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+    if model == 2:
+        f, jac_f = motion.ctra_point, motion.ctra_jacobian_point
+        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+    f, jac_f = motion.cca_point, motion.cca_jacobian_point
+    return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+
+
+@numba.njit
+def leading_entries_update_run(
+    x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s
+):
+    """:func:`update_run` with the GPS / pose kernels."""
+    h, jac_h = motion.leading_entries_point, motion.leading_entries_jacobian_point
+    return update_run(
+        h, jac_h, x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s
+    )
+
+
+_builtin_predict = batched_predict(builtin_predict_run)
+_leading_entries_update = batched_update(leading_entries_update_run)
+
+
 @numba.njit(cache=True)
 def predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
-    """:func:`predict_core` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
-    if model == 0:
-        return predict_core(
-            motion.cv_point,
-            motion.cv_jacobian_point,
-            mean,
-            cov,
-            args,
-            q_cov,
-            angles,
-            out_mean,
-            out_cov,
-        )
-    if model == 1:
-        return predict_core(
-            motion.ctrv_point,
-            motion.ctrv_jacobian_point,
-            mean,
-            cov,
-            args,
-            q_cov,
-            angles,
-            out_mean,
-            out_cov,
-        )
-    if model == 2:
-        return predict_core(
-            motion.ctra_point,
-            motion.ctra_jacobian_point,
-            mean,
-            cov,
-            args,
-            q_cov,
-            angles,
-            out_mean,
-            out_cov,
-        )
-    return predict_core(
-        motion.cca_point,
-        motion.cca_jacobian_point,
-        mean,
-        cov,
-        args,
-        q_cov,
-        angles,
-        out_mean,
-        out_cov,
-    )
+    """The batched prediction by :func:`builtin_predict_run`."""
+    return _builtin_predict(model, mean, cov, args, q_cov, angles, out_mean, out_cov)
 
 
 @numba.njit(cache=True)
 def update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
-    return update_core(
-        motion.leading_entries_point,
-        motion.leading_entries_jacobian_point,
-        mean,
-        cov,
-        z,
-        args,
-        r_cov,
-        state_angles,
-        angles,
-        out_mean,
-        out_cov,
+    """The batched update by :func:`leading_entries_update_run` (the GPS or pose model)."""
+    return _leading_entries_update(
+        mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov
     )
 
 
@@ -296,11 +351,12 @@ def predict_entry(point, jacobian_point) -> tuple:
     if found is None:
 
         @numba.njit
-        def entry(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
-            return predict_core(
-                point, jacobian_point, mean, cov, args, q_cov, angles, out_mean, out_cov
+        def run(selector, x, prior, step_args, q, angles, new_mean, new_cov, s):
+            return predict_run(
+                point, jacobian_point, x, prior, step_args, q, angles, new_mean, new_cov, s
             )
 
+        entry = batched_predict(run)
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -312,21 +368,23 @@ def update_entry(point, jacobian_point):
     if found is None:
 
         @numba.njit
-        def entry(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
-            return update_core(
+        def run(x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s):
+            return update_run(
                 point,
                 jacobian_point,
-                mean,
-                cov,
+                x,
+                prior,
                 z,
-                args,
-                r_cov,
+                step_args,
+                r,
                 state_angles,
                 angles,
-                out_mean,
-                out_cov,
+                new_mean,
+                new_cov,
+                s,
             )
 
+        entry = batched_update(run)
         found = UPDATE_ENTRIES[key] = entry
     return found
 
@@ -340,28 +398,16 @@ def predict(
     """The compiled prediction ``(mean, cov)`` of a belief, or ``None`` (numpy path).
 
     ``model`` is an additive-noise :class:`~localization.models.ProcessModel` with both
-    kernels. ``None`` when the step is not expressible here (a batch of more than one axis or
-    empty, arguments that are not numbers, a ``Q`` of another batch) or failed (status).
+    kernels. ``None`` when the step is not expressible here
+    (:func:`~localization.compiled.glue.entry_arrays`) or failed (status).
     """
-    runs = runs_of(mean)
-    q_cov = per_run(model.Q, runs)
-    packed = pack_args(args, mean.shape[:-1])
-    if runs == 0 or q_cov is None or packed is None:
+    arrays = entry_arrays(mean, cov, model.Q, args)
+    if arrays is None:
         return None
-    n = mean.shape[-1]
-    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    mean_b, cov_b, _, packed, q_cov, outputs = arrays
     key = (model.point, model.jacobian_point)
     entry, number = PREDICT_ENTRIES.get(key) or predict_entry(*key)
-    arguments = (
-        number,
-        read_only(mean.reshape(runs, n)),
-        read_only(cov.reshape(runs, n, n)),
-        packed,
-        q_cov,
-        angle_array(angle_indices),
-        out_mean,
-        out_cov,
-    )
+    arguments = (number, mean_b, cov_b, packed, q_cov, angle_array(angle_indices), *outputs)
     return call_entry(entry, arguments, "EKF", "predict", key, mean.ndim == 2)
 
 
@@ -373,32 +419,20 @@ def update(
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
     (the numpy path then refuses it with its message) or ``S`` is not positive definite.
     """
-    runs = runs_of(mean)
-    r_cov = per_run(model.R, runs)
-    packed = pack_args(args, mean.shape[:-1])
-    m = model.R.shape[-1]
-    if (
-        runs == 0
-        or r_cov is None
-        or packed is None
-        or not isinstance(z, np.ndarray)
-        or z.shape != mean.shape[:-1] + (m,)
-        or z.dtype.kind not in "biuf"
-    ):
+    arrays = entry_arrays(mean, cov, model.R, args, z)
+    if arrays is None:
         return None
-    n = mean.shape[-1]
-    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    mean_b, cov_b, z_b, packed, r_cov, outputs = arrays
     key = (model.point, model.jacobian_point)
     entry = UPDATE_ENTRIES.get(key) or update_entry(*key)
     arguments = (
-        read_only(mean.reshape(runs, n)),
-        read_only(cov.reshape(runs, n, n)),
-        writable(z.reshape(runs, m)),
+        mean_b,
+        cov_b,
+        z_b,
         packed,
         r_cov,
         angle_array(angle_indices),
         angle_array(model.angle_indices),
-        out_mean,
-        out_cov,
+        *outputs,
     )
     return call_entry(entry, arguments, "EKF", "update", key, mean.ndim == 2)

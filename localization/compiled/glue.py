@@ -137,6 +137,43 @@ def runs_of(mean: np.ndarray) -> int:
     return mean.shape[0] if mean.ndim == 2 else 0
 
 
+def entry_arrays(mean: np.ndarray, cov: np.ndarray, noise: np.ndarray, args: tuple, z=None):
+    """The arrays a compiled predict or update entry takes, or ``None`` when the step cannot be
+    expressed there (the numpy path then takes it).
+
+    ``mean (..., n)``, ``cov (..., n, n)`` a belief of one run or a flat batch, ``noise`` a
+    noise matrix ``(k, k)`` or per run ``(B, k, k)`` (``Q``, its square root or ``R``),
+    ``args`` the step's arguments, ``z`` the measurement of an update (``None`` for a
+    prediction): ``None`` too when it is not a real array of shape ``batch + (m,)``, ``m`` that
+    of ``noise``. Returns ``(mean (B, n), cov (B, n, n), z (B, m) or None, packed args,
+    noise (1 or B, k, k), (out_mean (B, n), out_cov (B, n, n)))``, the inputs read-only (``z``
+    writable), the outputs new.
+    """
+    runs = runs_of(mean)
+    noise_b = per_run(noise, runs)
+    packed = pack_args(args, mean.shape[:-1])
+    if runs == 0 or noise_b is None or packed is None:
+        return None
+    if z is not None:
+        m = noise_b.shape[-1]
+        if (
+            not isinstance(z, np.ndarray)
+            or z.shape != mean.shape[:-1] + (m,)
+            or z.dtype.kind not in "biuf"
+        ):
+            return None
+        z = writable(z.reshape(runs, m))
+    n = mean.shape[-1]
+    return (
+        read_only(mean.reshape(runs, n)),
+        read_only(cov.reshape(runs, n, n)),
+        z,
+        packed,
+        noise_b,
+        (np.empty((runs, n)), np.empty((runs, n, n))),
+    )
+
+
 def call_entry(entry, arguments: tuple, filter_name: str, kind: str, kernels, batched: bool):
     """``entry(*arguments)`` (its last two arguments the outputs ``(B, n)``, ``(B, n, n)``) as a
     step's result: ``(mean, cov)`` (one run's when not ``batched``), or ``None`` when the status

@@ -6,9 +6,10 @@ step checks its inputs, packs its arguments and builds two result beliefs around
 compiled calls: for one CTRV filter that Python is most of a 14 us step. :class:`LeanUKF` and
 :class:`LeanEKF` hold one run of a known model instead: everything about the model (the
 kernels, ``Q``, ``R``, the sigma weights, the step's arguments, the angle indices) is checked
-and packed once, at construction, into two arrays; a step is then one compiled call
-(:func:`ukf_step`, :func:`ekf_step`) on the filter's own state and covariance arrays, which it
-overwrites::
+and packed once, at construction, into a work array and a layout; a step is then one compiled
+call (:func:`ukf_step`, :func:`ekf_step`) of three arguments, the work array, ``z`` and the
+layout, which computes in the work array's scratch (it allocates nothing) and overwrites the
+filter's state there::
 
     lean = LeanUKF(UnscentedKalmanFilter(), CTRV.process_model(Q), pose_model(R), belief, dt_s)
     for z in measurements:        # z (m,) float64
@@ -16,23 +17,28 @@ overwrites::
     lean.mean, lean.cov           # read-only views of the state
     means, covs = lean.run(zs)    # zs (T, m): T steps in one call, (T, n) and (T, n, n)
 
-The arithmetic is that of the batched steps, the same cores on one run
-(:func:`localization.compiled.ukf.predict_core` and ``update_core``, the EKF's likewise), so a
-lean step equals the :class:`~localization.ukf.UnscentedKalmanFilter` step on the same belief
-bit for bit (tested). What the lean filters do not do: batches (a batch already pays its Python
-once per step for all runs), user kernels (the built-in motion models of
-:mod:`localization.motion_models` with the GPS or pose measurement), and the
-:class:`~localization.linalg.PDPolicy` repairs: a covariance that is not positive definite,
-or a non-finite measurement or result, raises an :class:`~localization.errors.EstimationError`
-and leaves the state as it was before the failing step.
+The arithmetic is that of the batched steps, the same per-run functions
+(:func:`localization.compiled.ukf.predict_run`, ``augmented_predict_run`` and ``update_run``,
+the EKF's likewise) on one run, so a lean step equals the
+:class:`~localization.ukf.UnscentedKalmanFilter` step on the same belief bit for bit (tested).
+What the lean filters do not do: batches (a batch already pays its Python once per step for
+all runs), user kernels (the built-in motion models of :mod:`localization.motion_models` with
+the GPS or pose measurement), and the :class:`~localization.linalg.PDPolicy` repairs: a
+covariance that is not positive definite, or a non-finite measurement or result, raises an
+:class:`~localization.errors.EstimationError` and leaves the state as it was before the failing
+step.
 
 Packing (:func:`pack`). ``layout`` (int64): the process kernel's number
 (:data:`localization.compiled.motion.MODEL_NUMBERS`), augmented (0/1), ``n``, ``m``, the
 number ``k`` of packed step arguments, the noise dimension ``q`` (``n`` additive), the counts of
-state and measurement angle indices, then those indices. ``consts`` (float64): the predict and
-update sigma weights ``(gamma, W_i, c0)`` (zeros for the EKF), the step arguments ``(k,)``,
-the process noise (``Q (n, n)`` additive, its square root ``S (q, q)`` augmented) and
-``R (m, m)``, flattened.
+state and measurement angle indices, then those indices. The work array (float64,
+:func:`work_length`): first the constants, the predict and update sigma weights
+``(gamma, W_i, c0)`` (zeros for the EKF), the step arguments ``(k,)``, the process noise
+(``Q (n, n)`` additive, its square root ``S (q, q)`` augmented) and ``R (m, m)``, flattened
+(:func:`_constants`); then the state, ``mean (n,)`` and ``cov (n, n)`` (:func:`_state`); then
+the predicted and the updated belief and the scratch of the filter's predict and update
+(:func:`ukf_scratch`, :func:`ekf_scratch`). A step writes the predicted and updated beliefs
+and copies the updated one onto the state only when it succeeded.
 """
 
 from __future__ import annotations
@@ -49,7 +55,7 @@ from localization.models import MeasurementModel, ProcessModel, ProcessNoise
 # layout entries
 _MODEL, _AUGMENTED, _N, _M, _K, _Q, _STATE_ANGLES, _MEASUREMENT_ANGLES = range(8)
 _HEADER = 8
-#: consts entries before the step arguments: the predict and the update weights
+#: work array entries before the step arguments: the predict and the update weights
 _WEIGHTS = 6
 _F64 = np.dtype(np.float64)
 
@@ -65,112 +71,163 @@ STATE_DIMENSIONS = {
 # ------------------------------------------------------------------------ compiled entries
 
 
-@numba.njit(cache=True)
-def _unpack(consts, layout):
-    """Views of the packed constants: ``(predict weights (3,), update weights (3,), args (1, k),
-    noise (1, q, q), R (1, m, m), state angles, measurement angles)``."""
+@numba.njit
+def _take(work, start, rows, cols):
+    """``(work[start:end] as (rows, cols), end)``: one reshape, whose rows and row blocks
+    are then views without one."""
+    end = start + rows * cols
+    return work[start:end].reshape((rows, cols)), end
+
+
+@numba.njit
+def _constants(work, layout):
+    """Views of the constants at the head of ``work`` (module docstring): ``(predict weights
+    (3,), update weights (3,), args (k,), noise (q, q), R (m, m), state angles, measurement
+    angles, end)``."""
     m, k, q = layout[_M], layout[_K], layout[_Q]
     first = _HEADER + layout[_STATE_ANGLES]
     state_angles = layout[_HEADER:first]
     measurement_angles = layout[first : first + layout[_MEASUREMENT_ANGLES]]
-    start = _WEIGHTS
-    args = consts[start : start + k].reshape((1, k))
-    start += k
-    noise = consts[start : start + q * q].reshape((1, q, q))
-    start += q * q
-    r_cov = consts[start : start + m * m].reshape((1, m, m))
-    return consts[0:3], consts[3:6], args, noise, r_cov, state_angles, measurement_angles
+    args = work[_WEIGHTS : _WEIGHTS + k]
+    noise, start = _take(work, _WEIGHTS + k, q, q)
+    r_cov, start = _take(work, start, m, m)
+    return (
+        work[0:3],
+        work[3:6],
+        args,
+        noise,
+        r_cov,
+        state_angles,
+        measurement_angles,
+        start,
+    )
+
+
+@numba.njit
+def _state(work, start, n):
+    """The state from ``start``: ``(mean (n,), cov (n, n), end)``."""
+    end = start + n + n * n
+    return work[start : start + n], work[start + n : end].reshape((n, n)), end
+
+
+@numba.njit
+def ukf_scratch(work, start, n, m, q):
+    """The UKF's beliefs and scratch from ``start``: ``(prior_mean, prior_cov, new_mean,
+    new_cov, predict scratch, update scratch, end)``, the scratch shaped as
+    :func:`localization.compiled.ukf.predict_scratch` and ``update_scratch``. Vectors are
+    slices, and the matrices of ``n`` columns, then those of ``m``, row blocks of one matrix
+    each: a view costs a step tens of nanoseconds, a reshape more than a slice."""
+    vectors_n, start = _take(work, start, 5, n)
+    prior_mean, new_mean, point, y0, shift = (
+        vectors_n[0],
+        vectors_n[1],
+        vectors_n[2],
+        vectors_n[3],
+        vectors_n[4],
+    )
+    noise = work[start : start + q]
+    vectors_m, start = _take(work, start + q, 4, m)
+    z0, z_shift, z_pred, innovation = vectors_m[0], vectors_m[1], vectors_m[2], vectors_m[3]
+    dev_rows = 2 * (n + q)
+    columns_n, start = _take(work, start, 3 * n + dev_rows + m, n)
+    prior_cov, new_cov, chol = columns_n[:n], columns_n[n : 2 * n], columns_n[2 * n : 3 * n]
+    dev = columns_n[3 * n : 3 * n + dev_rows]
+    gain_t = columns_n[3 * n + dev_rows :]
+    columns_m, start = _take(work, start, 3 * n + 2 * m, m)
+    z_dev, cross = columns_m[: 2 * n], columns_m[2 * n : 3 * n]
+    s_cov, s_chol = columns_m[3 * n : 3 * n + m], columns_m[3 * n + m :]
+    predict = (chol, point, noise, y0, shift, dev)
+    update = (chol, point, z0, z_shift, z_dev, z_pred, s_cov, s_chol, cross, gain_t, innovation)
+    return prior_mean, prior_cov, new_mean, new_cov, predict, update, start
+
+
+@numba.njit
+def ekf_scratch(work, start, n, m):
+    """As :func:`ukf_scratch` for the EKF, the scratch shaped as
+    :func:`localization.compiled.ekf.predict_scratch` and ``update_scratch``."""
+    vectors_n, start = _take(work, start, 3, n)
+    prior_mean, new_mean, point = vectors_n[0], vectors_n[1], vectors_n[2]
+    vectors_m, start = _take(work, start, 2, m)
+    z_pred, innovation = vectors_m[0], vectors_m[1]
+    columns_n, start = _take(work, start, 6 * n + 2 * m, n)
+    prior_cov, new_cov = columns_n[:n], columns_n[n : 2 * n]
+    jac_f, temp = columns_n[2 * n : 3 * n], columns_n[3 * n : 4 * n]
+    joseph, noise_part = columns_n[4 * n : 5 * n], columns_n[5 * n : 6 * n]
+    jac_h, gain_t = columns_n[6 * n : 6 * n + m], columns_n[6 * n + m :]
+    columns_m, start = _take(work, start, 3 * n + 2 * m, m)
+    cross, gain, temp_noise = columns_m[:n], columns_m[n : 2 * n], columns_m[2 * n : 3 * n]
+    s_cov, s_chol = columns_m[3 * n : 3 * n + m], columns_m[3 * n + m :]
+    update = (
+        point,
+        z_pred,
+        innovation,
+        jac_h,
+        cross,
+        s_cov,
+        s_chol,
+        gain_t,
+        gain,
+        joseph,
+        temp,
+        noise_part,
+        temp_noise,
+    )
+    return prior_mean, prior_cov, new_mean, new_cov, (point, jac_f, temp), update, start
 
 
 @numba.njit(cache=True)
-def _ukf_once(mean, cov, z, consts, layout, prior_mean, prior_cov, new_mean, new_cov) -> int:
-    """Predict + update of the run ``mean (1, n)``, ``cov (1, n, n)`` by ``z (1, m)`` into
-    ``new_mean``, ``new_cov`` (``prior_*`` the predicted belief); returns a status code."""
-    w_predict, w_update, args, noise, r_cov, state_angles, z_angles = _unpack(consts, layout)
-    model = layout[_MODEL]
+def ukf_step(work, z, layout) -> int:
+    """One UKF predict + update of the state held in ``work`` (module docstring; overwritten
+    on success) by ``z (m,)``; returns a status code. Everything the step needs is in ``work``
+    and ``layout``: it allocates nothing."""
+    n, m = layout[_N], layout[_M]
+    w_predict, w_update, args, noise, r_cov, state_angles, z_angles, start = _constants(
+        work, layout
+    )
+    mean, cov, start = _state(work, start, n)
+    prior_mean, prior_cov, new_mean, new_cov, predict, update, _ = ukf_scratch(
+        work, start, n, m, layout[_Q]
+    )
     if layout[_AUGMENTED]:
-        status = ukf.noisy_predict_builtin(
-            model, mean, cov, args, noise, w_predict, state_angles, prior_mean, prior_cov
+        status = ukf.builtin_augmented_predict_run(
+            layout[_MODEL],
+            mean,
+            cov,
+            args,
+            noise,
+            w_predict,
+            state_angles,
+            prior_mean,
+            prior_cov,
+            predict,
         )
     else:
-        status = ukf.predict_builtin(
-            model, mean, cov, args, noise, w_predict, state_angles, prior_mean, prior_cov
+        status = ukf.builtin_predict_run(
+            layout[_MODEL],
+            mean,
+            cov,
+            args,
+            noise,
+            w_predict,
+            state_angles,
+            prior_mean,
+            prior_cov,
+            predict,
         )
-    if status != OK:
-        return status
-    return ukf.update_leading_entries(
-        prior_mean,
-        prior_cov,
-        z,
-        args,
-        r_cov,
-        w_update,
-        state_angles,
-        z_angles,
-        new_mean,
-        new_cov,
-    )
-
-
-@numba.njit(cache=True)
-def _ekf_once(mean, cov, z, consts, layout, prior_mean, prior_cov, new_mean, new_cov) -> int:
-    """As :func:`_ukf_once` for the EKF (additive noise, Joseph-form update)."""
-    _, _, args, noise, r_cov, state_angles, z_angles = _unpack(consts, layout)
-    status = ekf.predict_builtin(
-        layout[_MODEL], mean, cov, args, noise, state_angles, prior_mean, prior_cov
-    )
-    if status != OK:
-        return status
-    return ekf.update_leading_entries(
-        prior_mean, prior_cov, z, args, r_cov, state_angles, z_angles, new_mean, new_cov
-    )
-
-
-@numba.njit(cache=True)
-def _accept(t, run_mean, run_cov, new_mean, new_cov, means_out, covs_out) -> None:
-    """Step ``t`` succeeded: its belief becomes the state, and row ``t`` of the record when
-    there is one (``means_out (T, n)``, ``covs_out (T, n, n)``; no rows: no record)."""
-    run_mean[:] = new_mean
-    run_cov[:] = new_cov
-    if means_out.shape[0] > 0:
-        means_out[t] = new_mean[0]
-        covs_out[t] = new_cov[0]
-
-
-@numba.njit(cache=True)
-def _work_views(work, n):
-    """The beliefs kept in a filter's work array ``(3 (n + n^2),)``: the state, the predicted
-    and the updated belief, each as ``mean (1, n)``, ``cov (1, n, n)``."""
-    size = n + n * n
-    views = []
-    for part in range(3):
-        start = part * size
-        views.append(
-            (
-                work[start : start + n].reshape((1, n)),
-                work[start + n : start + size].reshape((1, n, n)),
-            )
+    if status == OK:
+        status = ukf.leading_entries_update_run(
+            prior_mean,
+            prior_cov,
+            z,
+            args,
+            r_cov,
+            w_update,
+            state_angles,
+            z_angles,
+            new_mean,
+            new_cov,
+            update,
         )
-    return views[0], views[1], views[2]
-
-
-@numba.njit(cache=True)
-def ukf_step(work, z, consts, layout) -> int:
-    """One UKF predict + update of the state held in ``work`` (:func:`_work_views`; overwritten
-    on success) by ``z (m,)``, with the constants of :func:`pack`; returns a status code. The
-    work array spares the step its allocations and an argument."""
-    (mean, cov), (prior_mean, prior_cov), (new_mean, new_cov) = _work_views(work, layout[_N])
-    status = _ukf_once(
-        mean,
-        cov,
-        z.reshape((1, z.shape[0])),
-        consts,
-        layout,
-        prior_mean,
-        prior_cov,
-        new_mean,
-        new_cov,
-    )
     if status == OK:
         mean[:] = new_mean
         cov[:] = new_cov
@@ -178,76 +235,80 @@ def ukf_step(work, z, consts, layout) -> int:
 
 
 @numba.njit(cache=True)
-def ekf_step(work, z, consts, layout) -> int:
-    """As :func:`ukf_step` for the EKF."""
-    (mean, cov), (prior_mean, prior_cov), (new_mean, new_cov) = _work_views(work, layout[_N])
-    status = _ekf_once(
-        mean,
-        cov,
-        z.reshape((1, z.shape[0])),
-        consts,
-        layout,
-        prior_mean,
-        prior_cov,
-        new_mean,
-        new_cov,
+def ekf_step(work, z, layout) -> int:
+    """As :func:`ukf_step` for the EKF (additive noise, Joseph-form update)."""
+    n, m = layout[_N], layout[_M]
+    _, _, args, noise, r_cov, state_angles, z_angles, start = _constants(work, layout)
+    mean, cov, start = _state(work, start, n)
+    prior_mean, prior_cov, new_mean, new_cov, predict, update, _ = ekf_scratch(work, start, n, m)
+    status = ekf.builtin_predict_run(
+        layout[_MODEL], mean, cov, args, noise, state_angles, prior_mean, prior_cov, predict
     )
+    if status == OK:
+        status = ekf.leading_entries_update_run(
+            prior_mean,
+            prior_cov,
+            z,
+            args,
+            r_cov,
+            state_angles,
+            z_angles,
+            new_mean,
+            new_cov,
+            update,
+        )
     if status == OK:
         mean[:] = new_mean
         cov[:] = new_cov
     return status
 
 
-@numba.njit(cache=True)
-def ukf_run(mean, cov, zs, consts, layout, means_out, covs_out):
-    """The UKF over the measurements ``zs (T, m)`` in one call from ``mean (n,)``, ``cov (n, n)``
-    (left at the last good belief); each updated belief into ``means_out (T, n)``,
-    ``covs_out (T, n, n)``. Returns ``(status, steps done)``."""
-    n, m = mean.shape[0], zs.shape[1]
-    run_mean, run_cov = mean.reshape((1, n)), cov.reshape((1, n, n))
-    prior_mean, prior_cov = np.empty((1, n)), np.empty((1, n, n))
-    new_mean, new_cov = np.empty((1, n)), np.empty((1, n, n))
-    for t in range(zs.shape[0]):
-        status = _ukf_once(
-            run_mean,
-            run_cov,
-            zs[t].reshape((1, m)),
-            consts,
-            layout,
-            prior_mean,
-            prior_cov,
-            new_mean,
-            new_cov,
-        )
-        if status != OK:
-            return status, t
-        _accept(t, run_mean, run_cov, new_mean, new_cov, means_out, covs_out)
-    return OK, zs.shape[0]
+def _sequence(step):
+    """The compiled ``run(work, zs (T, m), layout, means_out (T, n), covs_out (T, n, n))``:
+    ``step`` (:func:`ukf_step`, :func:`ekf_step`) over the measurements ``zs``, each updated
+    belief into row ``t`` of the outputs; the state is left at the last good belief. Returns
+    ``(status, steps done)``. A factory for the reason of
+    :func:`localization.compiled.ukf.batched_predict`."""
+
+    @numba.njit
+    def run(work, zs, layout, means_out, covs_out):
+        mean, cov, _ = _state(work, _constants(work, layout)[-1], layout[_N])
+        for t in range(zs.shape[0]):
+            status = step(work, zs[t], layout)
+            if status != OK:
+                return status, t
+            means_out[t] = mean
+            covs_out[t] = cov
+        return OK, zs.shape[0]
+
+    return run
+
+
+_ukf_sequence = _sequence(ukf_step)
+_ekf_sequence = _sequence(ekf_step)
 
 
 @numba.njit(cache=True)
-def ekf_run(mean, cov, zs, consts, layout, means_out, covs_out):
-    """As :func:`ukf_run` for the EKF."""
-    n, m = mean.shape[0], zs.shape[1]
-    run_mean, run_cov = mean.reshape((1, n)), cov.reshape((1, n, n))
-    prior_mean, prior_cov = np.empty((1, n)), np.empty((1, n, n))
-    new_mean, new_cov = np.empty((1, n)), np.empty((1, n, n))
-    for t in range(zs.shape[0]):
-        status = _ekf_once(
-            run_mean,
-            run_cov,
-            zs[t].reshape((1, m)),
-            consts,
-            layout,
-            prior_mean,
-            prior_cov,
-            new_mean,
-            new_cov,
-        )
-        if status != OK:
-            return status, t
-        _accept(t, run_mean, run_cov, new_mean, new_cov, means_out, covs_out)
-    return OK, zs.shape[0]
+def ukf_run(work, zs, layout, means_out, covs_out):
+    """:func:`ukf_step` over a sequence of measurements in one call (:func:`_sequence`)."""
+    return _ukf_sequence(work, zs, layout, means_out, covs_out)
+
+
+@numba.njit(cache=True)
+def ekf_run(work, zs, layout, means_out, covs_out):
+    """:func:`ekf_step` over a sequence of measurements in one call (:func:`_sequence`)."""
+    return _ekf_sequence(work, zs, layout, means_out, covs_out)
+
+
+def work_length(layout: np.ndarray, unscented: bool) -> int:
+    """The length of a filter's work array (:func:`_constants`, :func:`_state`, then
+    :func:`ukf_scratch` or :func:`ekf_scratch`)."""
+    n, m, k, q = (int(layout[i]) for i in (_N, _M, _K, _Q))
+    head = _WEIGHTS + k + q * q + m * m + n + n * n
+    if unscented:
+        vectors = 5 * n + q + 4 * m
+        return head + vectors + (3 * n + 2 * (n + q) + m) * n + (3 * n + 2 * m) * m
+    return head + 3 * n + 2 * m + (6 * n + 2 * m) * n + (3 * n + 2 * m) * m
 
 
 # -------------------------------------------------------------------------- the Python side
@@ -262,8 +323,9 @@ def pack(
     weights: tuple | None,
     owner: str,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(consts, layout)`` of a lean filter (module docstring), or an :class:`EstimationError`
-    naming what the lean path cannot take. ``weights``: the predict and update
+    """``(consts, layout)`` of a lean filter: the constants at the head of its work array and
+    its layout (module docstring), or an :class:`EstimationError` naming what the lean path
+    cannot take. ``weights``: the predict and update
     :class:`~localization.sigma_points.SigmaWeights` (UKF) or ``None`` (EKF)."""
     augmented = process.noise == ProcessNoise.AUGMENTED
     if weights is not None:
@@ -324,20 +386,24 @@ class _LeanFilter:
     """The state and the Python side shared by :class:`LeanUKF` and :class:`LeanEKF`."""
 
     _owner = "lean filter"
+    _unscented = True
     _step_entry = staticmethod(ukf_step)
     _run_entry = staticmethod(ukf_run)
 
     def __init__(self, belief: Gaussian, consts: np.ndarray, layout: np.ndarray) -> None:
         self._angles = belief.angle_indices
         n = belief.mean.shape[0]
-        self._work = np.zeros(3 * (n + n * n))  # the state, then scratch (_work_views)
-        self._mean = self._work[:n]
-        self._cov = self._work[n : n + n * n].reshape(n, n)
+        # the constants, the state, the predicted and updated beliefs, the scratch
+        self._work = np.zeros(work_length(layout, self._unscented))
+        self._work[: consts.shape[0]] = consts
+        start = consts.shape[0]
+        self._mean = self._work[start : start + n]
+        self._cov = self._work[start + n : start + n + n * n].reshape(n, n)
         self._mean[:] = belief.mean
         self._cov[:] = belief.cov
-        self._consts, self._layout = consts, layout
+        self._layout = layout
         self._z_shape = (int(layout[_M]),)
-        # the entry and its fixed arguments as instance attributes: a step looks up nothing else
+        # the entry as an instance attribute: a step looks up nothing else
         self._entry = self._step_entry
         self.mean = self._mean.view()
         """``(n,)`` the current mean, a read-only view (it changes with every step)."""
@@ -377,7 +443,7 @@ class _LeanFilter:
         """
         if z.__class__ is not np.ndarray or z.dtype is not _F64 or z.shape != self._z_shape:
             z = self._measurements(z, 1)
-        status = self._entry(self._work, z, self._consts, self._layout)
+        status = self._entry(self._work, z, self._layout)
         if status:
             raise self._failed(status, None)
 
@@ -392,9 +458,7 @@ class _LeanFilter:
         zs = self._measurements(zs, 2)
         n = self._mean.shape[0]
         means, covs = np.empty((zs.shape[0], n)), np.empty((zs.shape[0], n, n))
-        status, done = self._run_entry(
-            self._mean, self._cov, zs, self._consts, self._layout, means, covs
-        )
+        status, done = self._run_entry(self._work, zs, self._layout, means, covs)
         if status:
             raise self._failed(status, done)
         return means, covs
@@ -443,6 +507,7 @@ class LeanEKF(_LeanFilter):
     docstring); the arguments as :class:`LeanUKF`'s, without the filter settings."""
 
     _owner = "LeanEKF"
+    _unscented = False
     _step_entry = staticmethod(ekf_step)
     _run_entry = staticmethod(ekf_run)
 

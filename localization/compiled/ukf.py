@@ -35,16 +35,20 @@ copies of the sigma point (a kernel may overwrite them). ``args`` are the step's
 arguments packed as floats (:func:`~localization.compiled.glue.pack_args`): each argument
 flattened, in order. The kernels of the motion models are :mod:`localization.compiled.motion`.
 
-Entries. The generic cores (:func:`predict_core`, :func:`update_core`) take the kernel as an
-argument, so they are only called from other compiled functions: numba then inlines the
-kernel into a specialised copy. The entries Python calls are module-level and cached on disk
-(``cache=True``) for the built-in kernels (:data:`PREDICT_ENTRIES`, :data:`UPDATE_ENTRIES`; one
-prediction entry switches between the four motion models, so their first compilation, about
-10 s per noise kind, happens together);
+Entries. Each step is written once for one run (:func:`predict_run`,
+:func:`augmented_predict_run`, :func:`update_run`), the kernel and the scratch arrays passed in,
+so that it allocates nothing; :func:`batched_predict` and :func:`batched_update` generate the
+loop over a batch's runs (scratch allocated once per call) around a run function, and the lean
+entries of :mod:`localization.compiled.lean` call the run functions on scratch kept in the
+filter. Functions that take a kernel as an argument are only called from other compiled
+functions, so numba inlines the kernel into a specialised copy. The entries Python calls are
+module-level and cached on disk (``cache=True``) for the built-in kernels
+(:data:`PREDICT_ENTRIES`, :data:`UPDATE_ENTRIES`; one prediction entry switches between the
+four motion models, so their first compilation, about 10 s per noise kind, happens together);
 for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
 compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
 file only; :mod:`localization.kernel_cache` drops the folder's cache whenever any of its files
-changes. The lean entries of :mod:`localization.compiled.lean` call the built-in entries.
+changes.
 
 Status. An entry returns a status code of :mod:`localization.compiled.glue`: ``OK``,
 ``NOT_POSITIVE_DEFINITE`` (a covariance to factorise, ``P`` or ``S``) or ``NOT_FINITE`` (an
@@ -70,11 +74,7 @@ from localization.compiled.glue import (
     OK,
     angle_array,
     call_entry,
-    pack_args,
-    per_run,
-    read_only,
-    runs_of,
-    writable,
+    entry_arrays,
 )
 from localization.compiled.linalg import (
     all_finite,
@@ -152,173 +152,222 @@ def _deviations(f, x, chol, gamma, step_args, angles, point, y0, dev) -> None:
             _wrap_row(dev, row, angles)
 
 
-@numba.njit
-def predict_core(f, mean, cov, args, q_cov, weights, angles, out_mean, out_cov) -> int:
-    """Additive-noise prediction of every run (module docstring), ``f(x, args, out)`` per point.
+# Each step is written once per run (``*_run``: one belief, its scratch arrays passed in, so
+# that it allocates nothing); the batched cores loop a run function over the runs with the
+# scratch allocated once per call, and the lean entries (:mod:`localization.compiled.lean`)
+# call the run functions on scratch kept in the filter. A run function is called
+# ``run(selector, x, P, ...)``: ``selector`` is the built-in kernel's number
+# (:data:`BUILTIN_PROCESS_KERNELS`) for the built-in runs, unused for a user's kernel.
 
-    ``mean (B, n)``, ``cov (B, n, n)``, ``args (B or 1, k)``, ``q_cov (B or 1, n, n)``,
-    ``weights (3,) = (gamma, W_i, c0)``, ``angles`` the state's angle indices (int64);
-    writes ``out_mean (B, n)``, ``out_cov (B, n, n)``. Returns a status code.
+
+@numba.njit
+def predict_scratch(n, q):
+    """Scratch of a prediction of ``n`` states with ``q`` noise inputs (``q = n`` additive):
+    ``(chol (n, n), point (n,), noise (q,), y0 (n,), shift (n,), dev (2 (n + q), n))``."""
+    return (
+        np.empty((n, n)),
+        np.empty(n),
+        np.empty(q),
+        np.empty(n),
+        np.empty(n),
+        np.empty((2 * (n + q), n)),
+    )
+
+
+@numba.njit
+def update_scratch(n, m):
+    """Scratch of an update of ``n`` states by ``m`` measurements: ``(chol (n, n), point (n,),
+    z0 (m,), shift (m,), dev (2n, m), z_pred (m,), s_cov (m, m), s_chol (m, m), cross (n, m),
+    gain_t (m, n), innovation (m,))``."""
+    return (
+        np.empty((n, n)),
+        np.empty(n),
+        np.empty(m),
+        np.empty(m),
+        np.empty((2 * n, m)),
+        np.empty(m),
+        np.empty((m, m)),
+        np.empty((m, m)),
+        np.empty((n, m)),
+        np.empty((m, n)),
+        np.empty(m),
+    )
+
+
+@numba.njit
+def predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, scratch) -> int:
+    """Additive-noise prediction of one run (module docstring), ``f(x, args, out)`` per point.
+
+    ``x (n,)``, ``prior (n, n)``, ``step_args (k,)``, ``q_cov (n, n)``, ``weights (3,) =
+    (gamma, W_i, c0)``, ``angles`` the state's angle indices (int64), ``scratch`` of
+    :func:`predict_scratch`; writes ``out_mean (n,)``, ``out_cov (n, n)``. Returns a status code.
     """
-    runs, n = mean.shape
-    if not all_finite(args):
+    chol, point, _, y0, shift, dev = scratch
+    if not cholesky_lower(prior, chol):
+        return NOT_POSITIVE_DEFINITE
+    _deviations(f, x, chol, weights[0], step_args, angles, point, y0, dev)
+    _moments(dev, 2 * x.shape[0], y0, weights, angles, q_cov, out_mean, out_cov, shift)
+    if not (all_finite(out_mean) and all_finite(out_cov)):
         return NOT_FINITE
-    gamma = weights[0]
-    chol = np.empty((n, n))
-    point = np.empty(n)
-    y0 = np.empty(n)
-    shift = np.empty(n)
-    dev = np.empty((2 * n, n))
-    for b in range(runs):
-        if not cholesky_lower(cov[b], chol):
-            return NOT_POSITIVE_DEFINITE
-        _deviations(
-            f, mean[b], chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, y0, dev
-        )
-        _moments(
-            dev,
-            2 * n,
-            y0,
-            weights,
-            angles,
-            q_cov[b if q_cov.shape[0] > 1 else 0],
-            out_mean[b],
-            out_cov[b],
-            shift,
-        )
-        if not (all_finite(out_mean[b]) and all_finite(out_cov[b])):
-            return NOT_FINITE
     return OK
 
 
 @numba.njit
-def augmented_predict_core(
-    f, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov
+def augmented_predict_run(
+    f, x, prior, step_args, root, weights, angles, out_mean, out_cov, scratch
 ) -> int:
-    """Augmented-noise prediction of every run, ``f(x, w, args, out)`` per point.
+    """Augmented-noise prediction of one run, ``f(x, w, args, out)`` per point.
 
-    As :func:`predict_core` with ``noise_sqrt (B or 1, q, q)`` a square root ``S S^T = Q``
+    As :func:`predict_run` with ``root (q, q)`` a square root ``S S^T = Q``
     (:attr:`~localization.models.ProcessModel.noise_sqrt`) and ``weights`` those of dimension
     ``n + q``. The ``2 (n + q)`` sigma points: ``(x +- gamma L_i, 0)`` for the state columns,
     ``(x, +-gamma S_j)`` for the noise columns.
     """
-    runs, n = mean.shape
-    q = noise_sqrt.shape[1]
-    if not all_finite(args):
-        return NOT_FINITE
+    chol, point, noise, y0, shift, dev = scratch
+    n, q = x.shape[0], root.shape[0]
+    if not cholesky_lower(prior, chol):
+        return NOT_POSITIVE_DEFINITE
     gamma = weights[0]
-    chol = np.empty((n, n))
-    point = np.empty(n)
-    noise = np.empty(q)
-    y0 = np.empty(n)
-    shift = np.empty(n)
-    dev = np.empty((2 * (n + q), n))
-    no_noise_cov = np.empty((0, 0))
-    for b in range(runs):
-        if not cholesky_lower(cov[b], chol):
-            return NOT_POSITIVE_DEFINITE
-        x = mean[b]
-        root = noise_sqrt[b if noise_sqrt.shape[0] > 1 else 0]
-        step_args = args[b if args.shape[0] > 1 else 0]
-        point[:] = x
-        noise[:] = 0.0
-        f(point, noise, step_args, y0)
-        dim = n + q
-        for i in range(dim):
-            for half in range(2):
-                row = i + half * dim
-                for j in range(n):
-                    spread = gamma * chol[j, i] if i < n else 0.0
-                    point[j] = x[j] + spread if half == 0 else x[j] - spread
-                for j in range(q):
-                    spread = gamma * root[j, i - n] if i >= n else 0.0
-                    noise[j] = spread if half == 0 else -spread
-                f(point, noise, step_args, dev[row])
-                for j in range(n):
-                    dev[row, j] -= y0[j]
-                _wrap_row(dev, row, angles)
-        _moments(dev, 2 * dim, y0, weights, angles, no_noise_cov, out_mean[b], out_cov[b], shift)
-        if not (all_finite(out_mean[b]) and all_finite(out_cov[b])):
-            return NOT_FINITE
+    point[:] = x
+    noise[:] = 0.0
+    f(point, noise, step_args, y0)
+    dim = n + q
+    for i in range(dim):
+        for half in range(2):
+            row = i + half * dim
+            for j in range(n):
+                spread = gamma * chol[j, i] if i < n else 0.0
+                point[j] = x[j] + spread if half == 0 else x[j] - spread
+            for j in range(q):
+                spread = gamma * root[j, i - n] if i >= n else 0.0
+                noise[j] = spread if half == 0 else -spread
+            f(point, noise, step_args, dev[row])
+            for j in range(n):
+                dev[row, j] -= y0[j]
+            _wrap_row(dev, row, angles)
+    _moments(dev, 2 * dim, y0, weights, angles, root[:0, :0], out_mean, out_cov, shift)
+    if not (all_finite(out_mean) and all_finite(out_cov)):
+        return NOT_FINITE
     return OK
 
 
 @numba.njit
-def update_core(
-    h, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+def update_run(
+    h, x, prior, z, step_args, r_cov, weights, state_angles, angles, out_mean, out_cov, scratch
 ) -> int:
-    """Measurement update of every run (module docstring), ``h(x, args, out)`` per point.
+    """Measurement update of one run (module docstring), ``h(x, args, out)`` per point.
 
-    ``mean (B, n)``, ``cov (B, n, n)``, ``z (B, m)``, ``args (B or 1, k)``,
-    ``r_cov (B or 1, m, m)``, ``weights (3,) = (gamma, W_i, c0)``, ``state_angles`` and
-    ``angles`` (the measurement's) angle indices (int64); writes ``out_mean (B, n)``,
-    ``out_cov (B, n, n)``. Returns a status code.
+    ``x (n,)``, ``prior (n, n)``, ``z (m,)``, ``step_args (k,)``, ``r_cov (m, m)``,
+    ``weights (3,) = (gamma, W_i, c0)``, ``state_angles`` and ``angles`` (the measurement's)
+    angle indices (int64), ``scratch`` of :func:`update_scratch`; writes ``out_mean (n,)``,
+    ``out_cov (n, n)``. Returns a status code.
     """
-    runs, n = mean.shape
-    m = z.shape[1]
-    if not (all_finite(args) and all_finite(z)):
+    chol, point, z0, shift, dev, z_pred, s_cov, s_chol, cross, gain_t, innovation = scratch
+    n, m = x.shape[0], z.shape[0]
+    if not all_finite(z):
         return NOT_FINITE
+    if not cholesky_lower(prior, chol):
+        return NOT_POSITIVE_DEFINITE
     gamma = weights[0]
-    chol = np.empty((n, n))
-    point = np.empty(n)
-    z0 = np.empty(m)
-    shift = np.empty(m)
-    dev = np.empty((2 * n, m))
-    z_pred = np.empty(m)
-    s_cov = np.empty((m, m))
-    s_chol = np.empty((m, m))
-    cross = np.empty((n, m))
-    gain_t = np.empty((m, n))
-    innovation = np.empty(m)
-    for b in range(runs):
-        prior = cov[b]
-        if not cholesky_lower(prior, chol):
-            return NOT_POSITIVE_DEFINITE
-        x = mean[b]
-        _deviations(h, x, chol, gamma, args[b if args.shape[0] > 1 else 0], angles, point, z0, dev)
-        _moments(
-            dev,
-            2 * n,
-            z0,
-            weights,
-            angles,
-            r_cov[b if r_cov.shape[0] > 1 else 0],
-            z_pred,
-            s_cov,
-            shift,
-        )
-        scale = weights[1] * gamma
-        for i in range(n):  # Pxz = W_i gamma L (D_{1..n} - D_{n+1..2n})
-            for c in range(m):
-                total = 0.0
-                for k in range(n):
-                    total += chol[i, k] * (dev[k, c] - dev[n + k, c])
-                cross[i, c] = scale * total
-        if not gain_from_cross(s_cov, cross, s_chol, gain_t):  # K^T = S^-1 Pxz^T
-            return NOT_POSITIVE_DEFINITE
+    _deviations(h, x, chol, gamma, step_args, angles, point, z0, dev)
+    _moments(dev, 2 * n, z0, weights, angles, r_cov, z_pred, s_cov, shift)
+    scale = weights[1] * gamma
+    for i in range(n):  # Pxz = W_i gamma L (D_{1..n} - D_{n+1..2n})
         for c in range(m):
-            innovation[c] = z[b, c] - z_pred[c]
-        for a in angles:
-            innovation[a] = wrap_angle(innovation[a])
-        new_mean = out_mean[b]
-        for i in range(n):  # x+ = x- + K (z - z-)
+            total = 0.0
+            for k in range(n):
+                total += chol[i, k] * (dev[k, c] - dev[n + k, c])
+            cross[i, c] = scale * total
+    if not gain_from_cross(s_cov, cross, s_chol, gain_t):  # K^T = S^-1 Pxz^T
+        return NOT_POSITIVE_DEFINITE
+    for c in range(m):
+        innovation[c] = z[c] - z_pred[c]
+    for a in angles:
+        innovation[a] = wrap_angle(innovation[a])
+    for i in range(n):  # x+ = x- + K (z - z-)
+        total = 0.0
+        for c in range(m):
+            total += innovation[c] * gain_t[c, i]
+        out_mean[i] = x[i] + total
+    for a in state_angles:
+        out_mean[a] = wrap_angle(out_mean[a])
+    for i in range(n):  # P+ = P- - Pxz K^T, symmetrised
+        for j in range(n):
             total = 0.0
             for c in range(m):
-                total += innovation[c] * gain_t[c, i]
-            new_mean[i] = x[i] + total
-        for a in state_angles:
-            new_mean[a] = wrap_angle(new_mean[a])
-        new_cov = out_cov[b]
-        for i in range(n):  # P+ = P- - Pxz K^T, symmetrised
-            for j in range(n):
-                total = 0.0
-                for c in range(m):
-                    total += cross[i, c] * gain_t[c, j]
-                new_cov[i, j] = prior[i, j] - total
-        symmetrise_in_place(new_cov)
-        if not (all_finite(new_mean) and all_finite(new_cov)):
-            return NOT_FINITE
+                total += cross[i, c] * gain_t[c, j]
+            out_cov[i, j] = prior[i, j] - total
+    symmetrise_in_place(out_cov)
+    if not (all_finite(out_mean) and all_finite(out_cov)):
+        return NOT_FINITE
     return OK
+
+
+def batched_predict(run):
+    """The compiled prediction of every run of a batch by ``run`` (:func:`predict_run`,
+    :func:`augmented_predict_run` or a built-in switch over them, called
+    ``run(selector, x, P, ...)``): ``core(selector, mean (B, n), cov (B, n, n), args (B or 1, k),
+    noise (B or 1, q, q), weights, angles, out_mean (B, n), out_cov (B, n, n))``, ``noise``
+    ``Q`` or its square root with augmented noise; returns a status code (the first run's that
+    is not :data:`OK`). A factory rather than a core taking ``run`` as an argument: numba does
+    not cache an entry that passes a function which itself passes a function (the kernel)."""
+
+    @numba.njit
+    def core(selector, mean, cov, args, noise, weights, angles, out_mean, out_cov) -> int:
+        runs, n = mean.shape
+        if not all_finite(args):
+            return NOT_FINITE
+        scratch = predict_scratch(n, noise.shape[1])
+        for b in range(runs):
+            status = run(
+                selector,
+                mean[b],
+                cov[b],
+                args[b if args.shape[0] > 1 else 0],
+                noise[b if noise.shape[0] > 1 else 0],
+                weights,
+                angles,
+                out_mean[b],
+                out_cov[b],
+                scratch,
+            )
+            if status != OK:
+                return status
+        return OK
+
+    return core
+
+
+def batched_update(run):
+    """As :func:`batched_predict` for an update (``run(x, P, z, ...)`` a call of
+    :func:`update_run`): ``core(mean, cov, z (B, m), args, r_cov (B or 1, m, m), weights,
+    state_angles, angles, out_mean, out_cov)``."""
+
+    @numba.njit
+    def core(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov) -> int:
+        runs, n = mean.shape
+        if not all_finite(args):
+            return NOT_FINITE
+        scratch = update_scratch(n, z.shape[1])
+        for b in range(runs):
+            status = run(
+                mean[b],
+                cov[b],
+                z[b],
+                args[b if args.shape[0] > 1 else 0],
+                r_cov[b if r_cov.shape[0] > 1 else 0],
+                weights,
+                state_angles,
+                angles,
+                out_mean[b],
+                out_cov[b],
+                scratch,
+            )
+            if status != OK:
+                return status
+        return OK
+
+    return core
 
 
 # ------------------------------------------------------------------- cached built-in entries
@@ -326,7 +375,8 @@ def update_core(
 # four motion models (a closure per model would not be cached). The kernel is named as a
 # module attribute (``motion.ctrv_point``): numba resolves that to a constant while
 # typing, whereas a bare imported name passed as a value is lowered as a pointer to the
-# Python object, which makes the entry uncacheable ("dynamic globals").
+# Python object, which makes the entry uncacheable ("dynamic globals"). The entries Python
+# calls take no function argument: one that does is compiled again in every process.
 
 
 #: The built-in process kernels (additive, augmented), by the number the entries switch on.
@@ -338,59 +388,68 @@ BUILTIN_PROCESS_KERNELS = (
 )
 
 
+@numba.njit
+def builtin_predict_run(model, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, s):
+    """:func:`predict_run` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    if model == 0:
+        f = motion.cv_point
+        return predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, s)
+    if model == 1:
+        f = motion.ctrv_point
+        return predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, s)
+    if model == 2:
+        f = motion.ctra_point
+        return predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, s)
+    f = motion.cca_point
+    return predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_cov, s)
+
+
+@numba.njit
+def builtin_augmented_predict_run(
+    model, x, prior, step_args, root, weights, angles, out_mean, out_cov, s
+):
+    """:func:`augmented_predict_run` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    run = augmented_predict_run
+    if model == 0:
+        f = motion.cv_noisy_point
+        return run(f, x, prior, step_args, root, weights, angles, out_mean, out_cov, s)
+    if model == 1:
+        f = motion.ctrv_noisy_point
+        return run(f, x, prior, step_args, root, weights, angles, out_mean, out_cov, s)
+    if model == 2:
+        f = motion.ctra_noisy_point
+        return run(f, x, prior, step_args, root, weights, angles, out_mean, out_cov, s)
+    f = motion.cca_noisy_point
+    return run(f, x, prior, step_args, root, weights, angles, out_mean, out_cov, s)
+
+
+@numba.njit
+def leading_entries_update_run(
+    x, prior, z, step_args, r_cov, weights, state_angles, angles, out_mean, out_cov, s
+):
+    """:func:`update_run` with the GPS / pose kernel."""
+    h = motion.leading_entries_point
+    return update_run(
+        h, x, prior, z, step_args, r_cov, weights, state_angles, angles, out_mean, out_cov, s
+    )
+
+
+_builtin_predict = batched_predict(builtin_predict_run)
+_builtin_augmented_predict = batched_predict(builtin_augmented_predict_run)
+_leading_entries_update = batched_update(leading_entries_update_run)
+
+
 @numba.njit(cache=True)
 def predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
-    """:func:`predict_core` with the additive kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
-    if model == 0:
-        return predict_core(
-            motion.cv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
-        )
-    if model == 1:
-        return predict_core(
-            motion.ctrv_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
-        )
-    if model == 2:
-        return predict_core(
-            motion.ctra_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
-        )
-    return predict_core(
-        motion.cca_point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
-    )
+    """The batched prediction by :func:`builtin_predict_run` (additive noise)."""
+    return _builtin_predict(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
 
 
 @numba.njit(cache=True)
 def noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
-    """:func:`augmented_predict_core` with the kernel number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
-    if model == 0:
-        return augmented_predict_core(
-            motion.cv_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
-        )
-    if model == 1:
-        return augmented_predict_core(
-            motion.ctrv_noisy_point,
-            mean,
-            cov,
-            args,
-            root,
-            weights,
-            angles,
-            out_mean,
-            out_cov,
-        )
-    if model == 2:
-        return augmented_predict_core(
-            motion.ctra_noisy_point,
-            mean,
-            cov,
-            args,
-            root,
-            weights,
-            angles,
-            out_mean,
-            out_cov,
-        )
-    return augmented_predict_core(
-        motion.cca_noisy_point, mean, cov, args, root, weights, angles, out_mean, out_cov
+    """The batched prediction by :func:`builtin_augmented_predict_run` (augmented noise)."""
+    return _builtin_augmented_predict(
+        model, mean, cov, args, root, weights, angles, out_mean, out_cov
     )
 
 
@@ -398,18 +457,9 @@ def noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mea
 def update_leading_entries(
     mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
 ):
-    return update_core(
-        motion.leading_entries_point,
-        mean,
-        cov,
-        z,
-        args,
-        r_cov,
-        weights,
-        state_angles,
-        angles,
-        out_mean,
-        out_cov,
+    """The batched update by :func:`leading_entries_update_run` (the GPS or pose model)."""
+    return _leading_entries_update(
+        mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
     )
 
 
@@ -435,21 +485,13 @@ def predict_entry(point, augmented: bool) -> tuple:
     key = (point, augmented)
     found = PREDICT_ENTRIES.get(key)
     if found is None:
-        if augmented:
+        one = augmented_predict_run if augmented else predict_run
 
-            @numba.njit
-            def entry(model, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov):
-                return augmented_predict_core(
-                    point, mean, cov, args, noise_sqrt, weights, angles, out_mean, out_cov
-                )
-        else:
+        @numba.njit
+        def run(selector, x, prior, step_args, noise, weights, angles, out_mean, out_cov, s):
+            return one(point, x, prior, step_args, noise, weights, angles, out_mean, out_cov, s)
 
-            @numba.njit
-            def entry(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
-                return predict_core(
-                    point, mean, cov, args, q_cov, weights, angles, out_mean, out_cov
-                )
-
+        entry = batched_predict(run)
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -460,11 +502,12 @@ def update_entry(point):
     if found is None:
 
         @numba.njit
-        def entry(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
-            return update_core(
-                point, mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+        def run(x, prior, z, step_args, r_cov, weights, state_angles, angles, mean, cov, s):
+            return update_run(
+                point, x, prior, z, step_args, r_cov, weights, state_angles, angles, mean, cov, s
             )
 
+        entry = batched_update(run)
         found = UPDATE_ENTRIES[point] = entry
     return found
 
@@ -479,30 +522,26 @@ def predict(
 
     ``weights`` are the :class:`~localization.sigma_points.SigmaWeights` of the state (or of
     the augmented state); ``model`` a :class:`~localization.models.ProcessModel` with a kernel.
-    ``None`` when the step is not expressible here (a batch of more than one axis or empty,
-    arguments that are not numbers, a noise matrix of another batch) or failed (status).
+    ``None`` when the step is not expressible here (:func:`~localization.compiled.glue.entry_arrays`)
+    or failed (status).
     """
-    runs = runs_of(mean)
     augmented = model.noise == ProcessNoise.AUGMENTED
-    noise = per_run(model.noise_sqrt if augmented else model.Q, runs)
-    packed = pack_args(args, mean.shape[:-1])
-    if runs == 0 or noise is None or packed is None:
+    arrays = entry_arrays(mean, cov, model.noise_sqrt if augmented else model.Q, args)
+    if arrays is None:
         return None
-    n = mean.shape[-1]
-    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    mean_b, cov_b, _, packed, noise, outputs = arrays
     entry, number = PREDICT_ENTRIES.get((model.point, augmented)) or predict_entry(
         model.point, augmented
     )
     arguments = (
         number,
-        read_only(mean.reshape(runs, n)),
-        read_only(cov.reshape(runs, n, n)),
+        mean_b,
+        cov_b,
         packed,
         noise,
         weights.packed,
         angle_array(angle_indices),
-        out_mean,
-        out_cov,
+        *outputs,
     )
     return call_entry(entry, arguments, "UKF", "predict", model.point, mean.ndim == 2)
 
@@ -521,32 +560,20 @@ def update(
     As :func:`predict`; also ``None`` when ``z`` is not a real array of shape ``batch + (m,)``
     (the numpy path then refuses it with its message).
     """
-    runs = runs_of(mean)
-    r_cov = per_run(model.R, runs)
-    packed = pack_args(args, mean.shape[:-1])
-    m = model.R.shape[-1]
-    if (
-        runs == 0
-        or r_cov is None
-        or packed is None
-        or not isinstance(z, np.ndarray)
-        or z.shape != mean.shape[:-1] + (m,)
-        or z.dtype.kind not in "biuf"
-    ):
+    arrays = entry_arrays(mean, cov, model.R, args, z)
+    if arrays is None:
         return None
-    n = mean.shape[-1]
-    out_mean, out_cov = np.empty((runs, n)), np.empty((runs, n, n))
+    mean_b, cov_b, z_b, packed, r_cov, outputs = arrays
     entry = UPDATE_ENTRIES.get(model.point) or update_entry(model.point)
     arguments = (
-        read_only(mean.reshape(runs, n)),
-        read_only(cov.reshape(runs, n, n)),
-        writable(z.reshape(runs, m)),
+        mean_b,
+        cov_b,
+        z_b,
         packed,
         r_cov,
         weights.packed,
         angle_array(angle_indices),
         angle_array(model.angle_indices),
-        out_mean,
-        out_cov,
+        *outputs,
     )
     return call_entry(entry, arguments, "UKF", "update", model.point, mean.ndim == 2)

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from localization.compiled import ukf as compiled_ukf
+from localization.compiled.glue import pack_args
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import CovarianceRepairWarning, PDPolicy
@@ -243,7 +244,7 @@ def test_steps_the_compiled_path_cannot_take_use_the_numpy_path(random_belief):
         warnings.simplefilter("error")
         two_axes = UKF.predict(grid, compiled, DT_S)
     np.testing.assert_array_equal(two_axes.mean, UKF.predict(grid, numpy_twin(compiled), DT_S).mean)
-    assert compiled_ukf.pack_args(("dt",), ()) is None
+    assert pack_args(("dt",), ()) is None
     assert (
         compiled_ukf.predict(UKF.points.weights(4), grid.mean, grid.cov, (), compiled, (DT_S,))
         is None

@@ -3,9 +3,16 @@ Kalman filter written here on a linear case, and their refusals."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from localization.compiled import lean as lean_module
 from localization.compiled.lean import LeanEKF, LeanUKF
 from localization.ekf import ExtendedKalmanFilter
 from localization.errors import EstimationError
@@ -161,3 +168,86 @@ def test_the_lean_filters_refuse_what_they_cannot_run():
     lean.step([float(v) for v in zs[0]])  # a list is taken as an array
     with pytest.raises(ValueError):
         lean.mean[0] = 1.0  # the views are read-only
+
+
+@pytest.mark.parametrize(("name", "noise"), CASES)
+def test_the_work_array_is_carved_to_its_last_entry(name, noise):
+    """The Python length of the work array and the compiled views of it agree: the views tile
+    it, none past its end and none short of it."""
+    process, measurement, belief, _ = _problem(name, noise)
+    filters: list[LeanUKF | LeanEKF] = [LeanUKF(UKF, process, measurement, belief, DT_S)]
+    if noise == ProcessNoise.ADDITIVE:
+        filters.append(LeanEKF(process, measurement, belief, DT_S))
+    n, m, q = belief.mean.shape[0], measurement.R.shape[0], process.Q.shape[0]
+    for lean in filters:
+        work, layout = lean._work, lean._layout
+        start = lean_module._constants(work, layout)[-1]
+        start = lean_module._state(work, start, n)[-1]
+        if isinstance(lean, LeanUKF):
+            end = lean_module.ukf_scratch(work, start, n, m, q)[-1]
+        else:
+            end = lean_module.ekf_scratch(work, start, n, m)[-1]
+        assert end == work.shape[0], type(lean).__name__
+
+
+ALLOCATIONS = """
+import numba
+import numpy as np
+from numba.core.runtime import rtsys
+
+from localization.compiled.lean import LeanEKF, LeanUKF
+from localization.gaussian import Gaussian
+from localization.motion_models import CTRV, pose_model
+from localization.ukf import UnscentedKalmanFilter
+
+ukf = UnscentedKalmanFilter()
+process, measurement = CTRV.process_model(np.eye(5) * 1e-3), pose_model(np.eye(3) * 0.1)
+belief = Gaussian(np.array([1.0, 2.0, 0.3, 4.0, 0.1]), np.eye(5), (2,))
+z = np.array([1.0, 2.0, 0.3])
+
+
+@numba.njit
+def nothing(work, z, layout):
+    return 0
+
+
+def allocations(step):
+    step()  # compiled (or loaded) before counting
+    before = rtsys.get_allocation_stats().alloc
+    for _ in range(10):
+        step()
+    return rtsys.get_allocation_stats().alloc - before
+
+
+lean_ukf = LeanUKF(ukf, process, measurement, belief, 0.01)
+lean_ekf = LeanEKF(process, measurement, belief, 0.01)
+print(
+    allocations(lambda: nothing(lean_ukf._work, z, lean_ukf._layout)),
+    allocations(lambda: lean_ukf.step(z)),
+    allocations(lambda: lean_ekf.step(z)),
+    allocations(lambda: lean_ukf.run(np.tile(z, (1, 1)))),
+    allocations(lambda: lean_ukf.run(np.tile(z, (50, 1)))),
+    allocations(lambda: ukf.update(ukf.predict(belief, process, 0.01), z, measurement)),
+)
+"""
+
+
+@pytest.mark.slow
+def test_a_lean_step_allocates_nothing():
+    """numba's runtime counts its allocations when ``NUMBA_NRT_STATS`` is set (in a new
+    process). Calling a compiled function wraps each array argument (one count each): a lean
+    step counts what a function doing nothing with the same arguments counts, a run of 50
+    steps what a run of one counts; the filter's compiled step (the control) more."""
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(ALLOCATIONS)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(root), "NUMBA_NRT_STATS": "1"},
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    nothing, ukf_step, ekf_step, run_1, run_50, filter_step = map(int, done.stdout.split())
+    assert ukf_step == ekf_step == nothing
+    assert run_50 == run_1
+    assert filter_step > nothing
