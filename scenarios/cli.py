@@ -18,7 +18,8 @@ Exit statuses and what stderr holds (always at most one line, without ``--debug`
 - 3: a defect of robotsim (a numerical or internal failure on input that passed
   validation): one line saying so, the traceback in a crash file whose path the line gives
   (``--debug`` prints the traceback instead);
-- 128 + n: stopped by signal n (SIGINT, SIGTERM, SIGHUP); temporary files removed.
+- 128 + n: stopped by signal n (SIGINT, SIGTERM, SIGHUP); temporary files removed; 141
+  (128 + SIGPIPE), silently, when the reader of stdout left (``robotsim scenarios | head -1``).
 """
 
 from __future__ import annotations
@@ -217,6 +218,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             if getattr(args, "check", None):
                 args.check(args)
             status = int(args.handler(args) or 0)
+            sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+        except BrokenPipeError:
+            # the reader of stdout left (``robotsim scenarios | head -1``): stop quietly, as a
+            # command killed by SIGPIPE does
+            _drop_stdout()
+            return 128 + signal.SIGPIPE
         except USER_ERRORS as exc:
             _say(f"robotsim: error: {exc}")
             return EXIT_USER_ERROR
@@ -319,6 +326,14 @@ def _quiet_finalisers() -> None:
     without its native half) fail to finalise silently: the process is exiting, and their
     "Exception ignored in __del__" would break the one line on stderr."""
     sys.unraisablehook = lambda unraisable: None
+
+
+def _drop_stdout() -> None:
+    """Point stdout at the null device, so that the interpreter's final flush of what is
+    still buffered for a reader that left raises nothing."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
 
 
 def _say(text: str) -> None:
