@@ -35,7 +35,7 @@ import tempfile
 import threading
 import traceback
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, NamedTuple, NoReturn
 
 from robotsim.errors import RobotsimError
@@ -148,8 +148,13 @@ COMMANDS = {
 
 
 class LazySubcommands(argparse._SubParsersAction):
-    """The sub-parsers of :data:`COMMANDS`, each given its options when its command is the
-    one chosen (argparse reaches a sub-parser only through this action's call)."""
+    """Sub-parsers each given its options only when its command is the one chosen (argparse
+    reaches a sub-parser only through this action's call): ``configure(name, sub_parser)``
+    is called then. ``robotsim`` configures its commands from :data:`COMMANDS`; ``robotsim
+    reproduce`` its experiments the same way (``scenarios.reproduce``). Made by
+    :func:`add_lazy_subcommands`."""
+
+    configure: Callable[[str, argparse.ArgumentParser], None]
 
     def __call__(
         self,
@@ -160,9 +165,21 @@ class LazySubcommands(argparse._SubParsersAction):
     ) -> None:
         assert isinstance(values, list)  # nargs=PARSER: the command and its arguments
         name = values[0]
-        if name in COMMANDS:  # else argparse reports the invalid choice
-            COMMANDS[name].configure(self._name_parser_map[name])
+        if name in self._name_parser_map:  # else argparse reports the invalid choice
+            self.configure(name, self._name_parser_map[name])
         super().__call__(parser, namespace, values, option_string)
+
+
+def add_lazy_subcommands(
+    parser: argparse.ArgumentParser,
+    configure: Callable[[str, argparse.ArgumentParser], None],
+    **options: Any,
+) -> LazySubcommands:
+    """``parser.add_subparsers(**options)`` as :class:`LazySubcommands` calling ``configure``."""
+    sub = parser.add_subparsers(action=LazySubcommands, **options)
+    assert isinstance(sub, LazySubcommands)
+    sub.configure = configure
+    return sub
 
 
 class VersionAction(argparse.Action):
@@ -198,8 +215,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="on an internal failure print the full traceback (and any warnings) to stderr",
     )
-    parser.register("action", "parsers", LazySubcommands)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = add_lazy_subcommands(
+        parser,
+        lambda name, chosen: COMMANDS[name].configure(chosen),
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+    )
     for name, command in COMMANDS.items():
         sub.add_parser(name, help=command.help)
     return parser

@@ -7,8 +7,9 @@ process loads it in milliseconds. A fresh install has no cache, so without this 
 install (``.ci/run`` does); it takes each built-in path a few steps:
 
 - ``run``: the default scenario for :data:`RUN_S` with each dead-reckoning filter, the IMAGESP
-  tracker and the ray test (:data:`RUN_VARIANTS`): the dead-reckoning step, the sonar box
-  tests, the in-room test and the ray kernels;
+  tracker, the ray test and the particle filter (:data:`RUN_VARIANTS`): the dead-reckoning
+  step, the sonar box tests, the in-room test, the ray kernels and the MCL kernels
+  (``localization.compiled.mcl``, the expected ranges of ``scenarios.mcl_ranges``);
 - ``filters``: one predict and one update of the UKF (additive and augmented noise) and of
   the EKF for every motion model of :data:`localization.motion_models.MODELS`, with the GPS
   and the pose measurement models: the compiled filter steps.
@@ -47,6 +48,7 @@ RUN_VARIANTS: tuple[dict[str, object], ...] = (
     {"filter": "iekf"},
     {"tracker": "imagesp"},
     {"ray_test": True},
+    {"estimator": "mcl"},
 )
 
 
