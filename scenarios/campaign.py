@@ -124,6 +124,19 @@ DASK_TASK_SIMULATED_S = 30.0
 #: The fewest tasks per worker a dask campaign is cut into, so that its last tasks still
 #: spread over the workers (a larger task is a longer wait for the last worker).
 TASKS_PER_WORKER = 4
+#: dask settings of a ``LocalCluster`` started here. Its background work costs CPU for as long
+#: as the campaign lasts, whatever the runs do: each event loop's tick (every 20 ms by
+#: default), the memory and system monitors, work stealing and the workers' statistical
+#: profiler. Idle, a cluster of two workers took 1.1 s of CPU per 10 s with dask's defaults
+#: and 0.18 s with these (BENCHMARKS.md, "Campaign throughput"); tasks of a third of a second
+#: and more need no finer polling, and there is no dashboard to feed.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing-interval": "1s",
+    "distributed.worker.profile.enabled": False,
+}
 
 
 # ---------------------------------------------------------------------------------------
@@ -627,12 +640,14 @@ def execute_dask(
 def _start_dask(scheduler: str | None, workers: int) -> Any:
     """A client of the scheduler at ``scheduler`` or of a new ``LocalCluster`` (closed with
     the client: :func:`_close_dask`), its workers having imported the run path."""
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
+        with dask.config.set(LOCAL_CLUSTER_CONFIG):  # read as the servers start
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            )
         try:
             client = Client(cluster)
         except BaseException:
