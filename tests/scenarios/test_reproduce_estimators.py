@@ -125,7 +125,7 @@ def test_quick_reproduction_runs_every_estimator_with_and_without_faults(tmp_pat
     assert all(r["sensors.sonar.faults"] > 0 for r in faulty)
     faulty_spec = load_scenario(out / "inputs" / "hall_faults.toml")
     assert (
-        len(faulty_spec.obstacles) == 2
+        len(faulty_spec.obstacles.items) == 2
         and not load_scenario(out / "inputs" / "hall.toml").obstacles
     )
     table = (out / "estimators.md").read_text()
