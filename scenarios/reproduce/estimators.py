@@ -211,8 +211,12 @@ def fault_obstacles(name: str, kidnap_xy_m: tuple[float, float]) -> list[dict[st
             steps = pace_m * np.column_stack([np.cos(angles), np.sin(angles)])
             starts = np.repeat(centres, len(steps) if pace_m else 1, axis=0)
             goals = starts + (np.tile(steps, (len(centres), 1)) if pace_m else 0.0)
-            travels = shapely.linestrings(np.stack([starts, goals], axis=1)) if pace_m else None
-            sweeps = travels if travels is not None else shapely.points(starts)
+            # what a box's centre covers: the segment it paces, or the point it stands on
+            sweeps = (
+                shapely.linestrings(np.stack([starts, goals], axis=1))
+                if pace_m
+                else shapely.points(starts)
+            )
             to_route = shapely.distance(sweeps, legs)
             fits = (
                 (to_route >= clear_m + half_m)
