@@ -46,6 +46,7 @@ import contextlib
 import dataclasses
 import hashlib
 import importlib
+import importlib.util
 import itertools
 import json
 import math
@@ -612,16 +613,14 @@ def execute_dask(
     """Run ``runs`` on dask.distributed: the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
     or a ``LocalCluster`` of ``workers`` processes when None; ``batch`` runs per task
     (default :func:`dask_batch` for the workers the scheduler has). The cluster starts (or
-    the client connects) and the workers import the run path in a thread while ``prepare``
-    runs here."""
-    try:
-        import distributed
-    except ImportError:
+    the client connects), ``distributed`` is imported and the workers import the run path in a
+    thread while ``prepare`` runs here."""
+    if importlib.util.find_spec("distributed") is None:  # imported in the starting thread
         raise ScenarioError(
             None,
             "--scheduler" if scheduler else "--cluster",
             "dask.distributed is not installed (pip install 'robotsim-testbed[cluster]')",
-        ) from None
+        )
     with contextlib.ExitStack() as stack:
         if scheduler is None:
             stack.enter_context(worker_environment())
@@ -631,9 +630,11 @@ def execute_dask(
         if prepare is not None:
             prepare()
         client = starting.result()
+        from distributed import as_completed
+
         size = batch or dask_batch(runs, max(1, sum(client.nthreads().values())))
         futures = client.map(run_batch, batched(runs, size), pure=False)
-        for future in distributed.as_completed(futures):
+        for future in as_completed(futures):
             sink(future.result())
 
 
