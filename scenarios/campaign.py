@@ -31,8 +31,12 @@ campaign killed at any moment (``kill -9`` included) loses at most the runs in f
 Execution: a local process pool (``--workers``, default all cores) or, with the ``[cluster]``
 extra, ``dask.distributed`` (``--cluster local`` starts a ``LocalCluster``; ``--scheduler
 tcp://HOST:PORT`` joins one). numba's kernels are compiled once in this process before any
-worker starts, so local workers load them from the disk cache instead of compiling them in
-parallel into the same cache; workers run with ``NUMBA_NUM_THREADS=1``.
+worker runs, so local workers load them from the disk cache instead of compiling them in
+parallel into the same cache; workers run with ``NUMBA_NUM_THREADS=1``. The workers start,
+and import what a run needs (:func:`import_run_path`), while this process compiles: the
+start of the pool or of the cluster is hidden behind the warm-up. A dask task holds runs
+worth :data:`DASK_TASK_SIMULATED_S` simulated seconds, fewer when that would leave a worker
+less than :data:`TASKS_PER_WORKER` tasks (:func:`dask_batch`).
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ import argparse
 import contextlib
 import dataclasses
 import hashlib
+import importlib
+import importlib.util
 import itertools
 import json
 import math
@@ -50,11 +56,17 @@ import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from concurrent.futures.process import BrokenProcessPool
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
@@ -62,9 +74,12 @@ from intervals.errors import IntervalError
 from localization.errors import EstimationError
 from robotsim.errors import RobotsimError
 from scenarios import outputs
+from scenarios.catalog import builtin_names
 from scenarios.errors import ScenarioError
-from scenarios.spec import ScenarioSpec, builtin_names, load_scenario
 from scenarios.tables import Table
+
+if TYPE_CHECKING:  # the scenarios (and with them numba) are read when a campaign loads
+    from scenarios.spec import ScenarioSpec
 
 #: Where ``robotsim campaign`` writes when no ``--out`` is given: ``runs/<campaign stem>``.
 DEFAULT_OUT_DIR = Path("runs")
@@ -102,9 +117,27 @@ WARM_UP_DURATION_S = 1.0
 
 #: Runs per task when the pool is local: one, so a kill loses at most the runs in flight.
 LOCAL_BATCH = 1
-#: Tasks per worker a dask campaign is cut into (fewer, larger tasks cost less to schedule).
+#: The simulated seconds of the runs of one dask task: dask costs a few milliseconds a task
+#: (scheduler, worker and client each handle it; BENCHMARKS.md, "Campaign throughput"), and
+#: 30 simulated seconds take about a third of a second on ``hall``: a run of 30 s or more is
+#: a task of its own, shorter runs are grouped.
+DASK_TASK_SIMULATED_S = 30.0
+#: The fewest tasks per worker a dask campaign is cut into, so that its last tasks still
+#: spread over the workers (a larger task is a longer wait for the last worker).
 TASKS_PER_WORKER = 4
-MAX_DASK_BATCH = 8
+#: dask settings of a ``LocalCluster`` started here. Its background work costs CPU for as long
+#: as the campaign lasts, whatever the runs do: each event loop's tick (every 20 ms by
+#: default), the memory and system monitors, work stealing and the workers' statistical
+#: profiler. Idle, a cluster of two workers took 1.1 s of CPU per 10 s with dask's defaults
+#: and 0.18 s with these (BENCHMARKS.md, "Campaign throughput"); tasks of a third of a second
+#: and more need no finer polling, and there is no dashboard to feed.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing-interval": "1s",
+    "distributed.worker.profile.enabled": False,
+}
 
 
 # ---------------------------------------------------------------------------------------
@@ -289,6 +322,8 @@ def flatten_tables(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def _load_named(name: str, base_dir: Path, source: str, key: str) -> ScenarioSpec:
     """A built-in scenario, or a scenario file relative to the campaign file's folder."""
+    from scenarios.spec import load_scenario
+
     if name in builtin_names():
         return load_scenario(name)
     path = Path(name)
@@ -510,12 +545,41 @@ def worker_environment() -> Iterator[None]:
                 os.environ[name] = value
 
 
-def execute_local(batches: list[list[CampaignRun]], workers: int, sink: RowsSink) -> None:
-    """Run the batches on a pool of ``workers`` fresh (spawned) processes."""
+#: The modules :func:`run_one` runs with (they import the rest of the run path).
+RUN_PATH_MODULES = ("scenarios.runner", "scenarios.commands")
+
+
+def import_run_path() -> None:
+    """Import what a run needs (the simulator, the estimators and numba), so that a worker
+    started while the campaign's process compiles spends that time importing, not its first
+    run. Nothing is compiled or loaded from numba's cache here: that waits for the first run,
+    after the warm-up (:func:`warm_up`)."""
+    for module in RUN_PATH_MODULES:
+        importlib.import_module(module)
+
+
+def execute_local(
+    runs: Sequence[CampaignRun],
+    workers: int,
+    sink: RowsSink,
+    *,
+    batch: int = LOCAL_BATCH,
+    prepare: Callable[[], None] | None = None,
+) -> None:
+    """Run ``runs``, ``batch`` per task, on a pool of ``workers`` fresh (spawned) processes,
+    handing each finished task's rows to ``sink``. ``prepare`` (the warm-up) runs here once
+    the workers are starting (they import the run path meanwhile) and before any run."""
     context = multiprocessing.get_context("spawn")
-    with worker_environment(), ProcessPoolExecutor(workers, mp_context=context) as pool:
+    with (
+        worker_environment(),
+        ProcessPoolExecutor(workers, mp_context=context, initializer=import_run_path) as pool,
+    ):
+        for _ in range(workers):  # each submit to a pool without an idle worker starts one
+            pool.submit(int)
+        if prepare is not None:
+            prepare()
         pending: set[Future[list[dict[str, Any]]]] = {
-            pool.submit(run_batch, batch) for batch in batches
+            pool.submit(run_batch, tasked) for tasked in batched(runs, batch)
         }
         try:
             while pending:
@@ -527,41 +591,88 @@ def execute_local(batches: list[list[CampaignRun]], workers: int, sink: RowsSink
                 future.cancel()
 
 
+def dask_batch(runs: Sequence[CampaignRun], workers: int) -> int:
+    """Runs per dask task: as many as make :data:`DASK_TASK_SIMULATED_S` simulated seconds
+    (on the runs' mean duration), at most as many as leave every one of ``workers``
+    :data:`TASKS_PER_WORKER` tasks, at least one."""
+    mean_s = sum(run.spec.run.duration_s for run in runs) / max(len(runs), 1)
+    wanted = math.ceil(DASK_TASK_SIMULATED_S / mean_s) if mean_s > 0 else 1
+    spread = len(runs) // (TASKS_PER_WORKER * workers)
+    return max(1, min(wanted, spread))
+
+
 def execute_dask(
-    batches: list[list[CampaignRun]], scheduler: str | None, workers: int, sink: RowsSink
+    runs: Sequence[CampaignRun],
+    scheduler: str | None,
+    workers: int,
+    sink: RowsSink,
+    *,
+    batch: int | None = None,
+    prepare: Callable[[], None] | None = None,
 ) -> None:
-    """Run the batches on dask.distributed: the scheduler at ``scheduler``
-    (``tcp://HOST:PORT``), or a ``LocalCluster`` of ``workers`` processes when None."""
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError:
+    """Run ``runs`` on dask.distributed: the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
+    or a ``LocalCluster`` of ``workers`` processes when None; ``batch`` runs per task
+    (default :func:`dask_batch` for the workers the scheduler has). The cluster starts (or
+    the client connects), ``distributed`` is imported and the workers import the run path in a
+    thread while ``prepare`` runs here."""
+    if importlib.util.find_spec("distributed") is None:  # imported in the starting thread
         raise ScenarioError(
             None,
             "--scheduler" if scheduler else "--cluster",
             "dask.distributed is not installed (pip install 'robotsim-testbed[cluster]')",
-        ) from None
+        )
     with contextlib.ExitStack() as stack:
         if scheduler is None:
             stack.enter_context(worker_environment())
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                )
-            )
-            client = stack.enter_context(Client(cluster))
-        else:
-            try:
-                client = stack.enter_context(Client(scheduler, timeout=30))
-            except OSError as exc:
-                raise ScenarioError(
-                    None, "--scheduler", f"cannot reach {scheduler}: {exc}"
-                ) from None
-        futures = client.map(run_batch, batches, pure=False)
+        starter = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="dask-start"))
+        starting = starter.submit(_start_dask, scheduler, workers)
+        stack.callback(_close_dask, starting)
+        if prepare is not None:
+            prepare()
+        client = starting.result()
+        from distributed import as_completed
+
+        size = batch or dask_batch(runs, max(1, sum(client.nthreads().values())))
+        futures = client.map(run_batch, batched(runs, size), pure=False)
         for future in as_completed(futures):
             sink(future.result())
+
+
+def _start_dask(scheduler: str | None, workers: int) -> Any:
+    """A client of the scheduler at ``scheduler`` or of a new ``LocalCluster`` (closed with
+    the client: :func:`_close_dask`), its workers having imported the run path."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is None:
+        with dask.config.set(LOCAL_CLUSTER_CONFIG):  # read as the servers start
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            )
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+    else:
+        try:
+            client = Client(scheduler, timeout=30)
+        except OSError as exc:
+            raise ScenarioError(None, "--scheduler", f"cannot reach {scheduler}: {exc}") from None
+    client.run(import_run_path)
+    return client
+
+
+def _close_dask(starting: Future[Any]) -> None:
+    """Close the client :func:`_start_dask` made (waiting for it), and its ``LocalCluster``."""
+    try:
+        client = starting.result()
+    except BaseException:  # it did not start: nothing to close (its error is raised already)
+        return
+    cluster = client.cluster  # None when the client joined a running scheduler
+    client.close()
+    if cluster is not None:
+        cluster.close()
 
 
 def batched(runs: Sequence[CampaignRun], size: int) -> list[list[CampaignRun]]:
@@ -729,11 +840,6 @@ def run_campaign(
     missing = [run for run in campaign.runs if run.key not in done]
     workers = workers or os.cpu_count() or 1
     on_dask = scheduler is not None or cluster is not None
-    batch = batch or (
-        min(MAX_DASK_BATCH, max(1, math.ceil(len(missing) / (TASKS_PER_WORKER * workers))))
-        if on_dask
-        else LOCAL_BATCH
-    )
     total = len(campaign.runs)
     print(
         f"campaign {campaign.name}: {total} runs, {total - len(missing)} already done, "
@@ -749,13 +855,13 @@ def run_campaign(
 
     try:
         if missing:
-            if scheduler is None:
-                warm_up(missing)
-            batches = batched(missing, batch)
+            # the local workers load what this process compiles; a remote cluster's workers
+            # compile on their own machines
+            prepare = (lambda: warm_up(missing)) if scheduler is None else None
             if on_dask:
-                execute_dask(batches, scheduler, workers, sink)
+                execute_dask(missing, scheduler, workers, sink, batch=batch, prepare=prepare)
             else:
-                execute_local(batches, workers, sink)
+                execute_local(missing, workers, sink, batch=batch or LOCAL_BATCH, prepare=prepare)
     except BrokenProcessPool:
         # a worker process died (out of memory, killed): the runs it had are not recorded as
         # failures, since they did not fail on their own; they stay missing for --resume

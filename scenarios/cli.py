@@ -18,7 +18,8 @@ Exit statuses and what stderr holds (always at most one line, without ``--debug`
 - 3: a defect of robotsim (a numerical or internal failure on input that passed
   validation): one line saying so, the traceback in a crash file whose path the line gives
   (``--debug`` prints the traceback instead);
-- 128 + n: stopped by signal n (SIGINT, SIGTERM, SIGHUP); temporary files removed.
+- 128 + n: stopped by signal n (SIGINT, SIGTERM, SIGHUP); temporary files removed; 141
+  (128 + SIGPIPE), silently, when the reader of stdout left (``robotsim scenarios | head -1``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import tempfile
 import threading
 import traceback
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, NamedTuple, NoReturn
 
 from robotsim.errors import RobotsimError
@@ -147,8 +148,13 @@ COMMANDS = {
 
 
 class LazySubcommands(argparse._SubParsersAction):
-    """The sub-parsers of :data:`COMMANDS`, each given its options when its command is the
-    one chosen (argparse reaches a sub-parser only through this action's call)."""
+    """Sub-parsers each given its options only when its command is the one chosen (argparse
+    reaches a sub-parser only through this action's call): ``configure(name, sub_parser)``
+    is called then. ``robotsim`` configures its commands from :data:`COMMANDS`; ``robotsim
+    reproduce`` its experiments the same way (``scenarios.reproduce``). Made by
+    :func:`add_lazy_subcommands`."""
+
+    configure: Callable[[str, argparse.ArgumentParser], None]
 
     def __call__(
         self,
@@ -159,9 +165,21 @@ class LazySubcommands(argparse._SubParsersAction):
     ) -> None:
         assert isinstance(values, list)  # nargs=PARSER: the command and its arguments
         name = values[0]
-        if name in COMMANDS:  # else argparse reports the invalid choice
-            COMMANDS[name].configure(self._name_parser_map[name])
+        if name in self._name_parser_map:  # else argparse reports the invalid choice
+            self.configure(name, self._name_parser_map[name])
         super().__call__(parser, namespace, values, option_string)
+
+
+def add_lazy_subcommands(
+    parser: argparse.ArgumentParser,
+    configure: Callable[[str, argparse.ArgumentParser], None],
+    **options: Any,
+) -> LazySubcommands:
+    """``parser.add_subparsers(**options)`` as :class:`LazySubcommands` calling ``configure``."""
+    sub = parser.add_subparsers(action=LazySubcommands, **options)
+    assert isinstance(sub, LazySubcommands)
+    sub.configure = configure
+    return sub
 
 
 class VersionAction(argparse.Action):
@@ -197,8 +215,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="on an internal failure print the full traceback (and any warnings) to stderr",
     )
-    parser.register("action", "parsers", LazySubcommands)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = add_lazy_subcommands(
+        parser,
+        lambda name, chosen: COMMANDS[name].configure(chosen),
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+    )
     for name, command in COMMANDS.items():
         sub.add_parser(name, help=command.help)
     return parser
@@ -217,6 +240,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             if getattr(args, "check", None):
                 args.check(args)
             status = int(args.handler(args) or 0)
+            sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+        except BrokenPipeError:
+            # the reader of stdout left (``robotsim scenarios | head -1``): stop quietly, as a
+            # command killed by SIGPIPE does
+            _drop_stdout()
+            return 128 + signal.SIGPIPE
         except USER_ERRORS as exc:
             _say(f"robotsim: error: {exc}")
             return EXIT_USER_ERROR
@@ -319,6 +348,14 @@ def _quiet_finalisers() -> None:
     without its native half) fail to finalise silently: the process is exiting, and their
     "Exception ignored in __del__" would break the one line on stderr."""
     sys.unraisablehook = lambda unraisable: None
+
+
+def _drop_stdout() -> None:
+    """Point stdout at the null device, so that the interpreter's final flush of what is
+    still buffered for a reader that left raises nothing."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
 
 
 def _say(text: str) -> None:

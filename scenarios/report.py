@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from scenarios import outputs
 from scenarios.campaign import RESULTS_FILE
@@ -70,6 +69,8 @@ def confidence_interval(values: np.ndarray) -> tuple[float, float, int]:
         return math.nan, math.nan, 0
     if n == 1:
         return float(finite[0]), math.nan, 1
+    from scipy import stats  # here, not at the top: ``robotsim report --help`` starts without it
+
     t = stats.t.ppf(0.5 + CONFIDENCE / 2.0, n - 1)
     return float(finite.mean()), float(t * finite.std(ddof=1) / math.sqrt(n)), n
 

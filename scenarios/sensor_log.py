@@ -27,18 +27,17 @@ import dataclasses
 import json
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
-from robotsim.simulation import SimulationLog
 from scenarios import outputs
 from scenarios.errors import ScenarioError
-from scenarios.mcl_pipeline import Estimator, estimate_mcl, mcl_summary
-from scenarios.pipeline import estimate, estimation_summary
-from scenarios.spec import ScenarioSpec, scenario_from_tables
+
+if TYPE_CHECKING:  # pyarrow, the scenarios and the estimators are imported where used, so
+    # that ``robotsim replay --help`` starts without them (and without numba)
+    from robotsim.simulation import SimulationLog
+    from scenarios.spec import ScenarioSpec
 
 #: Metadata keys of the file.
 SCENARIO_KEY = b"robotsim.scenario"
@@ -57,6 +56,9 @@ def scenario_tables(spec: ScenarioSpec) -> dict[str, Any]:
 
 def write_sensor_log(path: Path, spec: ScenarioSpec, log: SimulationLog) -> None:
     """Write ``log``'s sensor data and truth to the Parquet file ``path`` (format above)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     scans: list[list[float] | None] = [None] * len(log.t_s)
     at_sample = np.searchsorted(log.t_s, log.sonar_t_s - 0.5 / log.rate_hz)
     for sample, readings in zip(at_sample, log.sonar_range_m, strict=True):
@@ -114,6 +116,11 @@ def read_sensor_log(
         ScenarioError: an unreadable file, a missing column or metadata key, a scan of the
             wrong length, an estimation file with other tables (naming file and key).
     """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from scenarios.spec import scenario_from_tables
+
     source = str(path)
     try:
         table = pq.read_table(path)
@@ -183,6 +190,9 @@ def read_sensor_log(
 
 def replay(path: Path, estimation_file: Path | None = None) -> dict[str, Any]:
     """The localiser run on the log at ``path``: the estimation figures of the summary."""
+    from scenarios.mcl_pipeline import Estimator, estimate_mcl, mcl_summary
+    from scenarios.pipeline import estimate, estimation_summary
+
     spec, record = read_sensor_log(path, estimation_file)
     if spec.estimation.estimator == Estimator.MCL:
         figures = mcl_summary(record, estimate_mcl(spec, record))

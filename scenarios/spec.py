@@ -176,9 +176,17 @@ def default_follow(plan: Plan) -> Follow:
     the fused estimate for waypoints (``benchmarks/closed_loop.py``: on hall, office and the
     apartment, every seed completes its route with containment 1), the truth for a scripted
     profile or no route (nothing steers on a pose). A scenario with ``estimator = "mcl"``
-    gets the truth too (:func:`load_scenario`): the closed loop steers on the interval
-    pipeline's estimate."""
+    gets the truth instead (:func:`follow_for_estimator`)."""
     return Follow.ESTIMATE if isinstance(plan, Route) else Follow.TRUTH
+
+
+def follow_for_estimator(follow: Follow, estimator: Estimator) -> Follow:
+    """The rule "an MCL run follows the truth": ``follow``, or the truth when ``estimator``
+    is MCL, since the closed loop steers on the interval pipeline's estimate, which an MCL
+    run does not have. Applied where the follow is not the user's explicit choice: a
+    scenario file without ``[route] follow`` and :meth:`ScenarioSpec.with_estimation` (an
+    explicit closed loop with MCL is refused, :class:`ScenarioSpec`)."""
+    return Follow.TRUTH if estimator == Estimator.MCL else follow
 
 
 def default_fusion(follow: Follow) -> FusionRule:
@@ -432,11 +440,10 @@ class ScenarioSpec:
 
     def with_estimation(self, **changes: Any) -> ScenarioSpec:
         """This scenario with keys of ``[estimation]`` replaced (:meth:`EstimationSpec.with_keys`).
-        Switching to ``estimator = "mcl"`` also puts the route on the truth (``follow``), as a
-        scenario file with that estimator gets by default: the closed loop steers on the
-        interval pipeline's estimate, which an MCL run does not have."""
+        Switching to ``estimator = "mcl"`` also puts the route on the truth
+        (:func:`follow_for_estimator`), as a scenario file with that estimator gets by default."""
         estimation = self.estimation.with_keys(**changes)
-        follow = Follow.TRUTH if estimation.estimator == Estimator.MCL else self.follow
+        follow = follow_for_estimator(self.follow, estimation.estimator)
         return dataclasses.replace(self, estimation=estimation, follow=follow)
 
 
@@ -522,8 +529,8 @@ def _from_dict(data: dict[str, Any], *, source: str, base_dir: Path, name: str) 
     follow = default_follow(plan) if given_follow is None else Follow(given_follow)
     sensors = _read_sensors(top.take_table("sensors"), robot, run)
     estimation = _read_estimation(top.take_table("estimation"), robot, sensors.sonar, follow)
-    if given_follow is None and estimation.estimator == Estimator.MCL:
-        follow = Follow.TRUTH  # the closed loop steers on the interval pipeline's estimate
+    if given_follow is None:
+        follow = follow_for_estimator(follow, estimation.estimator)
     kidnaps, failures = _read_events(
         top.take_tables("events"), segment_map, robot, run, obstacles, start_pose, sensors.sonar
     )

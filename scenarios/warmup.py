@@ -7,8 +7,10 @@ process loads it in milliseconds. A fresh install has no cache, so without this 
 install (``.ci/run`` does); it takes each built-in path a few steps:
 
 - ``run``: the default scenario for :data:`RUN_S` with each dead-reckoning filter, the IMAGESP
-  tracker and the ray test (:data:`RUN_VARIANTS`): the dead-reckoning step, the sonar box
-  tests, the in-room test and the ray kernels;
+  tracker and the ray test (:data:`RUN_VARIANTS`), and for :data:`MCL_RUN_S` with the particle
+  filter: the dead-reckoning step, the sonar box tests, the in-room test, the ray kernels and
+  the MCL kernels (``localization.compiled.mcl``, the expected ranges of
+  ``scenarios.mcl_ranges``);
 - ``filters``: one predict and one update of the UKF (additive and augmented noise) and of
   the EKF for every motion model of :data:`localization.motion_models.MODELS`, with the GPS
   and the pose measurement models: the compiled filter steps.
@@ -48,10 +50,14 @@ RUN_VARIANTS: tuple[dict[str, object], ...] = (
     {"tracker": "imagesp"},
     {"ray_test": True},
 )
+#: Simulated seconds of the default scenario's run with the particle filter: long enough for
+#: the robot to move past ``update_min_d``, so that the motion model is sampled (1 s is not).
+MCL_RUN_S = 3.0
 
 
 def warm_runs() -> None:
-    """The default scenario for :data:`RUN_S` with each of :data:`RUN_VARIANTS`."""
+    """The default scenario for :data:`RUN_S` with each of :data:`RUN_VARIANTS`, and for
+    :data:`MCL_RUN_S` with the particle filter."""
     from scenarios.catalog import DEFAULT_MAP
     from scenarios.runner import run_scenario
     from scenarios.spec import load_scenario
@@ -59,6 +65,7 @@ def warm_runs() -> None:
     spec = load_scenario(DEFAULT_MAP).with_run(duration_s=RUN_S)
     for variant in RUN_VARIANTS:
         run_scenario(spec.with_estimation(**variant))
+    run_scenario(spec.with_estimation(estimator="mcl").with_run(duration_s=MCL_RUN_S))
 
 
 def warm_filters() -> None:

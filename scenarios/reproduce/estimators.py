@@ -13,10 +13,12 @@ Five estimators on the same simulated worlds (common random numbers, seed by see
 
 Each built-in plan of :data:`SCENARIOS` runs twice: as shipped (no sensor faults) and as
 ``<name>_faults``: sonar outliers (``outlier_prob``) and lost echoes (``lost_echo_prob``),
-:data:`FAULTS`, and a kidnapping halfway through the run to the free pose farthest from the
-route (no odometry of the jump). Unmapped obstacles (``[world] obstacles``) are not among
-the faults yet. Every run follows its route on the true pose (``[route] follow = "truth"``):
-the same world for every estimator, seed by seed.
+:data:`FAULTS`; two obstacles the map lacks (``[world] obstacles``, :func:`fault_obstacles`):
+a static box and a box pacing to and fro, each placed as near the route as it may be while
+its whole sweep stays clear of the route, the start, the kidnap pose and the walls; and a
+kidnapping halfway through the run to the free pose farthest from the route (no odometry of
+the jump). Every run follows its route on the true pose (``[route] follow = "truth"``): the
+same world for every estimator, seed by seed.
 
 It is an ordinary campaign (``scenarios.campaign``): the scenario files and the campaign
 file are written to ``DIR/inputs/`` (``robotsim campaign DIR/inputs/estimators.toml`` runs
@@ -46,10 +48,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from localization.fusion import FusionRule
 from robotsim.control import Route
 from robotsim.maps import point_segment_distance
+from robotsim.world import WorldParams
 from scenarios import report as report_module
 from scenarios.campaign import Campaign, ResultsFolder, load_campaign, run_campaign
 from scenarios.errors import ScenarioError
@@ -77,6 +81,23 @@ FAULTS = {"outlier_prob": 0.02, "lost_echo_prob": 0.02}
 KIDNAP_AT = 0.5
 #: Clearance of the kidnap pose from the walls beyond the robot's radius, m.
 KIDNAP_CLEARANCE_M = 0.15
+
+#: The unmapped obstacles of the ``_faults`` variants, width x depth, m: a static box (an
+#: armchair) and a box pacing to and fro (a person seen from above).
+STATIC_BOX_M = (0.6, 0.6)
+PACING_BOX_M = (0.4, 0.3)
+#: How far the pacing box walks from its start before it turns back, m (the longest that
+#: fits), and its speed, m/s.
+PACE_M = (1.5, 1.0, 0.5)
+PACE_SPEED_M_S = 0.5
+#: The clearance of an obstacle's sweep from the route, the kidnap pose and the other
+#: obstacle beyond the robot's radius (and the lookahead at the waypoints), m; and from the
+#: walls beyond their thickness, m.
+OBSTACLE_CLEARANCE_M = 0.25
+OBSTACLE_WALL_GAP_M = 0.05
+#: Candidate positions (drawn uniformly over the free space, seed 1) and pacing directions.
+OBSTACLE_CANDIDATES = 2000
+PACE_DIRECTIONS = 8
 
 #: The particle filter's settings (``[estimation.mcl]``): a prior dense enough for global
 #: localisation on these floors, and random particles to find a kidnapped robot.
@@ -153,6 +174,83 @@ def kidnap_pose(name: str) -> tuple[float, float, float]:
     return float(x), float(y), 180.0
 
 
+def fault_obstacles(name: str, kidnap_xy_m: tuple[float, float]) -> list[dict[str, Any]]:
+    """The ``[[world.obstacles]]`` tables of ``name_faults``: a :data:`STATIC_BOX_M` box and a
+    :data:`PACING_BOX_M` box walking to and fro (the longest of :data:`PACE_M` that fits),
+    each as near the route as it may be (so that the sonars meet it) with its whole sweep
+    clear of the robot: beyond the robot's radius plus :data:`OBSTACLE_CLEARANCE_M` from the
+    route's legs (from the start through every waypoint, back to the first on a loop), the
+    kidnap pose ``kidnap_xy_m`` and the first box, and beyond that plus the lookahead from
+    every waypoint (pure pursuit cuts a corner by at most its lookahead); and
+    :data:`OBSTACLE_WALL_GAP_M` beyond the walls' thickness from every wall. A box's sweep
+    lies within its half diagonal of the segment its centre travels, so these distances are
+    taken from that segment (a point for the static box), for every candidate at once.
+
+    Raises:
+        ScenarioError: a plan with no such place (a defect of this reproduction's settings).
+    """
+    spec = load_scenario(name)
+    plan = spec.plan
+    lookahead_m = plan.lookahead_m if isinstance(plan, Route) else 0.0
+    clear_m = spec.robot.radius_m + OBSTACLE_CLEARANCE_M
+    path = np.vstack([np.array(spec.start_pose[:2])[None], _waypoints(spec)])
+    if isinstance(plan, Route) and plan.loop:
+        path = np.vstack([path, path[1:2]])
+    legs = shapely.LineString(path) if len(path) > 1 else shapely.Point(path[0])
+    corners = shapely.MultiPoint(path)
+    walls = shapely.MultiLineString(list(spec.map.segments))
+    wall_gap_m = WorldParams().wall_radius_m + OBSTACLE_WALL_GAP_M
+    keep_off = [shapely.Point(kidnap_xy_m)]
+    sample = free_space_sampler(spec.map, math.hypot(*STATIC_BOX_M) / 2.0 + wall_gap_m)
+    centres = sample(np.random.default_rng(1), OBSTACLE_CANDIDATES)
+    angles = np.arange(PACE_DIRECTIONS) * (2.0 * math.pi / PACE_DIRECTIONS)
+    tables: list[dict[str, Any]] = []
+    for size_m, paces in ((STATIC_BOX_M, (0.0,)), (PACING_BOX_M, PACE_M)):
+        half_m = math.hypot(*size_m) / 2.0
+        for pace_m in paces:
+            steps = pace_m * np.column_stack([np.cos(angles), np.sin(angles)])
+            starts = np.repeat(centres, len(steps) if pace_m else 1, axis=0)
+            goals = starts + (np.tile(steps, (len(centres), 1)) if pace_m else 0.0)
+            # what a box's centre covers: the segment it paces, or the point it stands on
+            sweeps = (
+                shapely.linestrings(np.stack([starts, goals], axis=1))
+                if pace_m
+                else shapely.points(starts)
+            )
+            to_route = shapely.distance(sweeps, legs)
+            fits = (
+                (to_route >= clear_m + half_m)
+                & (shapely.distance(sweeps, corners) >= clear_m + lookahead_m + half_m)
+                & (shapely.distance(sweeps, walls) >= wall_gap_m + half_m)
+            )
+            for other in keep_off:
+                fits &= shapely.distance(sweeps, other) >= clear_m + half_m
+            if fits.any():
+                best = int(np.flatnonzero(fits)[np.argmin(to_route[fits])])
+                tables.append(_box_table(starts[best], size_m, goals[best] if pace_m else None))
+                keep_off.append(sweeps[best].buffer(half_m))
+                break
+        else:
+            raise ScenarioError(
+                None, "world.obstacles", f"{name}: no place for a {size_m} m box off the route"
+            )
+    return tables
+
+
+def _box_table(
+    centre: np.ndarray, size_m: tuple[float, float], goal: np.ndarray | None
+) -> dict[str, Any]:
+    """The ``[[world.obstacles]]`` table of a box of ``size_m`` centred on ``centre``, walking
+    to ``goal`` and back for ever when one is given."""
+    (x, y), (half_w, half_d) = centre, (size_m[0] / 2.0, size_m[1] / 2.0)
+    corners = [(x - half_w, y - half_d), (x + half_w, y - half_d), (x + half_w, y + half_d)]
+    corners.append((x - half_w, y + half_d))
+    table: dict[str, Any] = {"polygon_m": [[float(a), float(b)] for a, b in corners]}
+    if goal is not None:
+        table.update(path_m=[[float(goal[0]), float(goal[1])]], speed_m_s=PACE_SPEED_M_S, loop=True)
+    return table
+
+
 def _waypoints(spec) -> np.ndarray:
     return spec.plan.waypoints_m if isinstance(spec.plan, Route) else np.zeros((0, 2))
 
@@ -169,12 +267,14 @@ def scenario_variants(name: str, duration_s: float) -> dict[str, dict[str, Any]]
     faulty = json.loads(json.dumps(clean))
     faulty.setdefault("sensors", {}).setdefault("sonar", {}).update(FAULTS)
     x, y, heading = kidnap_pose(name)
+    faulty.setdefault("world", {}).setdefault("obstacles", []).extend(fault_obstacles(name, (x, y)))
     faulty["events"] = [
         {"kind": "kidnap", "t_s": KIDNAP_AT * duration_s, "xy_m": [x, y], "heading_deg": heading}
     ]
     faulty["description"] = (
         f"{name} with sonar outliers and lost echoes ({FAULTS['outlier_prob']:g}, "
-        f"{FAULTS['lost_echo_prob']:g}) and a kidnapping at {KIDNAP_AT * duration_s:g} s"
+        f"{FAULTS['lost_echo_prob']:g}), a static and a pacing box the map lacks, and a "
+        f"kidnapping at {KIDNAP_AT * duration_s:g} s"
     )
     return {name: clean, f"{name}_faults": faulty}
 

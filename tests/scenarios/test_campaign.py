@@ -173,7 +173,7 @@ def run_on_pool(campaign, out: Path) -> list[dict]:
         for row in batch_rows:
             folder.commit(row)
 
-    campaign_module.execute_local(campaign_module.batched(campaign.runs, 1), 2, sink)
+    campaign_module.execute_local(campaign.runs, 2, sink)
     return rows(folder.merge(campaign))
 
 
@@ -258,6 +258,25 @@ def pool_workers(pid: int) -> list[int]:
 
 
 @pytest.mark.slow
+def test_dask_tasks_hold_about_thirty_simulated_seconds_and_leave_every_worker_several(tmp_path):
+    """:func:`dask_batch`: long runs one a task; short runs grouped up to the task's simulated
+    time, but never into fewer than ``TASKS_PER_WORKER`` tasks a worker."""
+    text = CAMPAIGN.replace("count = 2", "count = COUNT").replace("5.0", "DURATION")
+
+    def batch(count: int, duration_s: float, workers: int) -> int:
+        edited = text.replace("COUNT", str(count)).replace("DURATION", str(duration_s))
+        runs = campaign_module.load_campaign(write(tmp_path, edited)).runs
+        assert len(runs) == 2 * count
+        return campaign_module.dask_batch(runs, workers)
+
+    per_task = campaign_module.DASK_TASK_SIMULATED_S
+    tasks_per_worker = campaign_module.TASKS_PER_WORKER
+    assert batch(50, per_task, 1) == batch(50, 2 * per_task, 2) == 1
+    assert batch(200, per_task / 10, 1) == 10  # 400 runs, 40 tasks
+    assert batch(200, per_task / 10, 20) == 400 // (tasks_per_worker * 20)  # 5: spread first
+    assert batch(2, 1.0, 8) == 1  # fewer runs than the workers can share: one a task
+
+
 def test_a_worker_killed_by_the_system_leaves_its_runs_missing_not_failed(tmp_path):
     """A worker process that dies (the kernel's OOM killer, an operator) is no failure of
     its runs: the campaign stops with status 1 and a hint, and ``--resume`` runs the rest."""

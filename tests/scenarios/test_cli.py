@@ -46,6 +46,23 @@ def test_scenarios_lists_every_builtin_with_its_description(tmp_path):
         assert line.split(None, 1)[1] == load_scenario(name).description
 
 
+def test_a_reader_that_leaves_early_stops_the_listing_quietly(tmp_path):
+    """``robotsim scenarios | head -1``: the pipe's read end is closed before the listing is
+    written, so its write fails; the command exits as SIGPIPE would, saying nothing."""
+    listing = subprocess.Popen(
+        [ROBOTSIM, "scenarios"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert listing.stdout is not None and listing.stderr is not None
+    listing.stdout.close()  # long before the interpreter has started and written
+    stderr = listing.stderr.read()
+    assert listing.wait(timeout=120) == 128 + signal.SIGPIPE
+    assert stderr == ""
+
+
 def test_run_writes_a_recording_and_summary_that_read_back(tmp_path):
     rrd, summary_path = tmp_path / "out" / "hall.rrd", tmp_path / "out" / "hall.json"
     done = robotsim(

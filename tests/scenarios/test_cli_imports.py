@@ -2,8 +2,10 @@
 on the path that needs it (issue 17: ``import scenarios.cli`` and ``robotsim --help`` in
 under 0.3 s; the figures are in BENCHMARKS.md, "First run").
 
-The commands that validate scenario settings (``campaign``, ``replay``, ``reproduce``) import
-the estimators, and with them numba, as their options are read; a run imports what it runs.
+Every command's ``--help`` starts without them too: the command modules import the scenarios
+and the estimators (and with them numba) where a run reads them, and ``robotsim reproduce``
+reads each experiment's one-line help from its source, importing only the chosen
+experiment. A run imports what it runs.
 Each case runs in a fresh interpreter and reads its ``sys.modules`` at the end: a module an
 earlier test imported cannot hide an import here.
 """
@@ -66,6 +68,11 @@ def cli_code(*args: str) -> str:
         ("scenarios",),
         ("run", "--help"),
         ("warmup", "--help"),
+        ("campaign", "--help"),
+        ("replay", "--help"),
+        ("report", "--help"),
+        ("reproduce", "--help"),
+        ("campaign", "no-such-campaign.toml"),  # refused (exit 2) before any scenario is read
         ("run", "--seed", "not-a-number"),  # refused while parsing: nothing imported
     ],
     ids=lambda a: " ".join(a) or "import",
@@ -106,3 +113,23 @@ def test_every_command_names_a_module_and_functions_that_exist():
         module = importlib.import_module(command.module)
         for function in (command.add_arguments, command.handler):
             assert function is None or callable(getattr(module, function)), (name, function)
+
+
+def test_the_experiments_are_listed_with_their_help_without_importing_them():
+    """``robotsim reproduce --help`` reads ``HELP`` from each module's source: the same text
+    the imported module holds, for every module of the package that is an experiment."""
+    import importlib
+    import pkgutil
+
+    import scenarios.reproduce as package
+    from scenarios.reproduce import experiment_helps
+
+    listed = experiment_helps()
+    found = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"scenarios.reproduce.{info.name}")
+        if all(hasattr(module, name) for name in ("HELP", "add_arguments", "main")):
+            found[info.name.replace("_", "-")] = module
+    assert set(listed) == set(found) and len(found) >= 5
+    for name, module in found.items():
+        assert listed[name] == (module.__name__, module.HELP), name

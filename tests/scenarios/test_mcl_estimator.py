@@ -21,7 +21,7 @@ from localization.mcl import BeamCombination, MclSettings
 from scenarios.errors import ScenarioError
 from scenarios.mcl_pipeline import MCL_BRANCH, Estimator, MclEstimation, carried_poses
 from scenarios.runner import run_scenario
-from scenarios.spec import load_scenario, parse_scenario
+from scenarios.spec import Follow, follow_for_estimator, load_scenario, parse_scenario
 from tests.helpers import annotation_labels, recording_columns
 
 ROBOTSIM = str(Path(sys.executable).with_name("robotsim"))
@@ -124,6 +124,20 @@ def test_mcl_keys_can_be_set_one_level_down_as_a_campaign_grid_does():
     assert changed.estimation.mcl.max_particles == 5000
     with pytest.raises(ScenarioError, match=r"mcl\.bogus"):
         spec.with_estimation(**{"mcl.bogus": 1})
+
+
+def test_an_mcl_run_follows_the_truth_whether_read_from_a_file_or_switched_in_code():
+    """One rule (``follow_for_estimator``) for both ways of asking for MCL: the waypoints of
+    ``BASE`` give a closed loop by default, which MCL cannot steer."""
+    closed = parse("")
+    assert closed.follow == Follow.ESTIMATE
+    from_file = parse('[estimation]\nestimator = "mcl"')
+    switched = closed.with_estimation(estimator="mcl")
+    assert from_file.follow == switched.follow == Follow.TRUTH
+    assert closed.with_estimation(fusion="truncated").follow == Follow.ESTIMATE
+    for follow in Follow:
+        assert follow_for_estimator(follow, Estimator.MCL) == Follow.TRUTH
+        assert follow_for_estimator(follow, Estimator.INTERVALS) == follow
 
 
 # -- the estimate between updates -----------------------------------------------------

@@ -7,9 +7,11 @@ import tomllib
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+import shapely
 
 from scenarios.cli import main
 from scenarios.reproduce import estimators
+from scenarios.runner import simulate_spec
 from scenarios.spec import BUILTIN_FOLDER, builtin_names, load_scenario
 
 
@@ -36,6 +38,53 @@ def test_the_faults_variant_adds_outliers_lost_echoes_and_a_kidnap_to_a_free_pos
     start = np.array(faulty.start_pose[:2])
     assert np.hypot(*(np.array(kidnap.pose[:2]) - start)) > 1.0
     assert clean.estimation.mcl.max_particles == estimators.MCL_SETTINGS["max_particles"]
+
+
+def variant_specs(name: str, duration_s: float, folder, *, only_obstacles: bool = False):
+    """The clean and faulty specs of ``name`` (the faulty one with its obstacles alone when
+    ``only_obstacles``: no sonar faults, no kidnap), read back from the files written."""
+    variants = estimators.scenario_variants(name, duration_s)
+    faulty = variants[f"{name}_faults"]
+    if only_obstacles:
+        faulty.pop("events")
+        for key in estimators.FAULTS:
+            faulty["sensors"]["sonar"].pop(key)
+    specs = []
+    for variant, tables in variants.items():
+        (folder / f"{variant}.toml").write_text(estimators.toml_text(tables))
+        specs.append(load_scenario(folder / f"{variant}.toml"))
+    return specs
+
+
+@pytest.mark.parametrize("name", estimators.SCENARIOS)
+def test_the_faults_variant_has_a_static_and_a_pacing_box_clear_of_the_route(name, tmp_path):
+    """Validated by the loader (inside the walls, clear of the start) and, here, clear of the
+    route by the robot's radius beyond the clearance: the obstacles' sweeps against the
+    route's legs, recomputed from the specs."""
+    clean, faulty = variant_specs(name, 40.0, tmp_path)
+    assert not clean.obstacles and "world.obstacles" in faulty.injected_faults
+    static, pacing = faulty.obstacles.items
+    assert not static.moving and pacing.moving and pacing.loop
+    waypoints = faulty.plan.waypoints_m
+    path = np.vstack([np.array(faulty.start_pose[:2])[None], waypoints, waypoints[:1]])
+    route = shapely.LineString(path)
+    for obstacle in (static, pacing):
+        gap = obstacle.swept().distance(route)
+        assert gap >= faulty.robot.radius_m + estimators.OBSTACLE_CLEARANCE_M - 1e-9, (name, gap)
+    (kidnap,) = faulty.kidnaps
+    assert static.swept().distance(shapely.Point(kidnap.pose[:2])) > faulty.robot.radius_m
+
+
+@pytest.mark.slow  # two 60 s simulations
+def test_the_obstacles_are_seen_by_the_sonars_and_do_not_block_the_route(tmp_path):
+    """On hall, the faulty variant with its obstacles alone: the robot's path is the clean
+    run's, sample for sample (no contact), and the sonars' readings differ on many scans."""
+    clean, obstructed = variant_specs("hall", 60.0, tmp_path, only_obstacles=True)
+    assert obstructed.obstacles and not obstructed.kidnaps
+    a, b = simulate_spec(clean), simulate_spec(obstructed)
+    np.testing.assert_array_equal(a.pose, b.pose)
+    changed = (a.sonar_range_m != b.sonar_range_m).any(axis=1)
+    assert changed.mean() > 0.2, changed.mean()
 
 
 @pytest.mark.slow
@@ -74,6 +123,11 @@ def test_quick_reproduction_runs_every_estimator_with_and_without_faults(tmp_pat
     faulty = [r for r in rows if r["scenario"] == "hall_faults"]
     assert all(r["kidnaps.0.t_s"] == 6.0 for r in faulty)
     assert all(r["sensors.sonar.faults"] > 0 for r in faulty)
+    faulty_spec = load_scenario(out / "inputs" / "hall_faults.toml")
+    assert (
+        len(faulty_spec.obstacles.items) == 2
+        and not load_scenario(out / "inputs" / "hall.toml").obstacles
+    )
     table = (out / "estimators.md").read_text()
     for estimator in estimators.ESTIMATORS:
         assert (

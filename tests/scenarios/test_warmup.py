@@ -66,6 +66,12 @@ def test_after_the_warm_up_a_run_compiles_nothing(tmp_path):
     )
     assert compiled_by(run, cache, tmp_path) == []
     assert json.loads((tmp_path / "a.json").read_text())["containment"] == 1.0
+    # the particle filter too: its updates, resampling and recovery over a longer run
+    mcl = (
+        "__import__('scenarios.runner').runner.run_scenario(__import__('scenarios.spec')"
+        ".spec.load_scenario('office').with_estimation(estimator='mcl').with_run(duration_s=8))"
+    )
+    assert compiled_by(mcl, cache, tmp_path) == []
 
 
 @pytest.mark.slow
