@@ -21,7 +21,6 @@ from intervals.boxes import (
     DEFAULT_HEADING_SCALE_M_PER_RAD,
     Subpaving,
     as_boxes,
-    max_width,
     pose_scale,
 )
 from intervals.errors import IntervalError
@@ -90,7 +89,7 @@ def clip_to_regions(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray,
     empty row, lower bounds above upper), and whether it lies within one region. Every point
     of a box that lies in some region stays in its clipped box. ``O(N M)`` in blocks of
     about a million box-region pairs, for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
-    n, m, d = boxes.shape[0], regions.shape[0], boxes.shape[1]
+    n, m = boxes.shape[0], regions.shape[0]
     clipped, held = np.empty_like(boxes), np.zeros(n, dtype=bool)
     step = max(1, (1 << 20) // max(m, 1))
     for start in range(0, n, step):
