@@ -180,6 +180,7 @@ def _pave(
     contract=True,
     shave_rounds=0,
     whole=False,
+    tests_per_box=TESTS_PER_BOX,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged, held (Ni,))``
     with the number of sensors rejecting each boundary box (``merged``: see below), kept from
@@ -189,7 +190,7 @@ def _pave(
     ``inner`` only, else empty).
 
     ``max_boxes`` (None: no budget): the budget of :func:`localize`. SIVIA may then test at
-    most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes, best first (the boxes fewest sensors
+    most ``tests_per_box`` (default :data:`TESTS_PER_BOX`) ``* max_boxes`` boxes, best first (the boxes fewest sensors
     reject first, see :func:`intervals.sivia.sivia`), and hand at most ``max_boxes`` to one
     test call. When it is cut short the boxes it left untested (children of undecided boxes)
     are tested once, in chunks, and those the test rejects are dropped (each rejection is
@@ -280,7 +281,7 @@ def _pave(
         max_boxes=DEFAULT_MAX_BOXES if max_boxes is None else min(max_boxes, DEFAULT_MAX_BOXES),
         splits_per_level=splits_per_level,
         min_level_boxes=MIN_LEVEL_BOXES,
-        max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
+        max_tested=None if max_boxes is None else tests_per_box * max_boxes,
         contract=contracted if contract or within is not None else None,
         idle=still,
     )
@@ -296,7 +297,7 @@ def _pave(
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
-            rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
+            rounds = min(rounds, max(tests_per_box * max_boxes - tested[0], 0) // (6 * n))
         if contract and n and rounds:
             paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
         return paving, rejects, False, inner_counts(paving.inner)
@@ -320,7 +321,7 @@ def _pave(
     if not np.array_equal(done, paving.boundary[: done.shape[0]]):
         done, rejects_done = done[:0], rejects_done[:0]  # not in SIVIA's order: all retested
     # at most as many retests as the budget's tests; boxes beyond are kept whole, untested
-    cap = TESTS_PER_BOX * max_boxes if max_boxes is not None else paving.boundary.shape[0]
+    cap = tests_per_box * max_boxes if max_boxes is not None else paving.boundary.shape[0]
     rest = paving.boundary[done.shape[0] :]
     tested, tested_counts = retest(rest[:cap])
     untested = rest[cap:]
@@ -450,6 +451,7 @@ def gomne(
     contract: bool = True,
     shave_rounds: int = 0,
     whole_boxes: bool = False,
+    tests_per_box: int = TESTS_PER_BOX,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -477,7 +479,8 @@ def gomne(
     (:mod:`intervals.sonar.idle`): where the set is large by nature (the sensors out of reach
     of every wall, or their echoes lost, constrain nothing; a strip along one wall) it is held
     by a few large boxes. Never a looser set from the first (an inner box lies in the set);
-    the second only chooses where to cut.
+    the second only chooses where to cut. ``tests_per_box``: with ``max_boxes``, SIVIA tests
+    at most this many times ``max_boxes`` boxes (default :data:`TESTS_PER_BOX`).
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
@@ -501,6 +504,7 @@ def gomne(
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
         whole_boxes,
+        int(tests_per_box),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
