@@ -281,7 +281,7 @@ def _pave(
         max_boxes=DEFAULT_MAX_BOXES if max_boxes is None else min(max_boxes, DEFAULT_MAX_BOXES),
         splits_per_level=splits_per_level,
         min_level_boxes=MIN_LEVEL_BOXES,
-        max_tested=None if max_boxes is None else tests_per_box * max_boxes,
+        max_tested=None if max_boxes is None else int(tests_per_box * max_boxes),
         contract=contracted if contract or within is not None else None,
         idle=still,
     )
@@ -297,7 +297,7 @@ def _pave(
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
-            rounds = min(rounds, max(tests_per_box * max_boxes - tested[0], 0) // (6 * n))
+            rounds = min(rounds, max(int(tests_per_box * max_boxes) - tested[0], 0) // (6 * n))
         if contract and n and rounds:
             paving, rejects = _shaved(paving, rejects, local, q, engine, rounds, max_boxes)
         return paving, rejects, False, inner_counts(paving.inner)
@@ -321,7 +321,7 @@ def _pave(
     if not np.array_equal(done, paving.boundary[: done.shape[0]]):
         done, rejects_done = done[:0], rejects_done[:0]  # not in SIVIA's order: all retested
     # at most as many retests as the budget's tests; boxes beyond are kept whole, untested
-    cap = tests_per_box * max_boxes if max_boxes is not None else paving.boundary.shape[0]
+    cap = int(tests_per_box * max_boxes) if max_boxes is not None else paving.boundary.shape[0]
     rest = paving.boundary[done.shape[0] :]
     tested, tested_counts = retest(rest[:cap])
     untested = rest[cap:]
@@ -451,7 +451,7 @@ def gomne(
     contract: bool = True,
     shave_rounds: int = 0,
     whole_boxes: bool = False,
-    tests_per_box: int = TESTS_PER_BOX,
+    tests_per_box: float = TESTS_PER_BOX,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -504,7 +504,7 @@ def gomne(
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
         whole_boxes,
-        int(tests_per_box),
+        float(tests_per_box),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)

@@ -108,11 +108,16 @@ def covered_volume(boxes: np.ndarray, cells: int = COVER_CELLS) -> float:
 KEPT_PER_BOX = TESTS_PER_BOX
 
 #: With ``whole_boxes``, a tracking epoch's SIVIA tests at most this many times ``max_boxes``
-#: boxes (global searches and refinements :data:`intervals.localize.TESTS_PER_BOX`): a tracking
+#: boxes (global searches and the epochs that continue a :class:`Refinement`:
+#: :data:`intervals.localize.TESTS_PER_BOX`), and none is refined after it: a tracking
 #: set that needs more is large by nature (big_hall with half its echoes lost, where one or two
 #: echoes leave slabs of poses as wide as the prediction), and a depth-first cut at 4 gave on
 #: 30 epochs of it a smaller mean set (285 against 454 m²) in a quarter of the time of 20.
 TRACKING_TESTS_PER_BOX = 4
+
+#: ... but at least this many tests (or ``TESTS_PER_BOX * max_boxes`` if fewer): a small
+#: ``max_boxes`` (office at 200) keeps the budget it had for its tracking sets.
+TRACKING_MIN_TESTS = 40_000
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
@@ -378,7 +383,7 @@ class IntervalTracker:
         initial: np.ndarray,
         splits_per_level: int = 3,
         within=None,
-        tests_per_box: int = TESTS_PER_BOX,
+        tests_per_box: float = TESTS_PER_BOX,
     ):
         """GOMNE on ``initial`` under the budget (``tests_per_box`` tests a box of it), keeping
         up to :data:`KEPT_PER_BOX` ``* max_boxes`` boxes (for a :class:`Refinement`)."""
@@ -443,7 +448,13 @@ class IntervalTracker:
                     scale = pose_scale(s.heading_scale_m_per_rad)
                     within = coarsen(within, MAX_WITHIN_REGIONS, scale)
                 predicted = self._hull_prediction(previous, dt_s)
-            tests = TRACKING_TESTS_PER_BOX if s.whole_boxes else TESTS_PER_BOX
+            # a refinement's chain keeps the full budget (it refines a set cut short for want
+            # of budget, e.g. a global search); other tracking epochs the smaller one
+            cheap = s.whole_boxes and refinement is None
+            tests = float(TESTS_PER_BOX)
+            if cheap:
+                floor = min(float(TESTS_PER_BOX), TRACKING_MIN_TESTS / s.max_boxes)
+                tests = max(float(TRACKING_TESTS_PER_BOX), floor)
             found = self._search(scan, predicted, within=within, tests_per_box=tests)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
@@ -454,7 +465,7 @@ class IntervalTracker:
             pending = None  # a fine set, reported whole: an older refinement is done with
         elif found.merged:
             pending = None  # a set the budget had to merge is too large to refine: none
-        elif s.whole_boxes and status == EpochStatus.TRACKING and coarse and pending is None:
+        elif s.whole_boxes and status == EpochStatus.TRACKING and coarse and refinement is None:
             # a tracking set the budget cut short is large by nature (its prediction holds it,
             # as the parts the scan cannot split are kept whole): refining it on its scan next
             # epoch would double that epoch's cost for a set the next scan paves anyway
