@@ -144,8 +144,10 @@ def coarsen(boxes: np.ndarray, max_count: int, scale: np.ndarray | None = None) 
     """At most ``max_count`` boxes ``(M, d, 2)`` whose union holds the union of ``boxes (N, d,
     2)``: the boxes themselves if few enough, else the cells of a regular grid that meet them
     (:func:`grid_cells`: outward rounded, no two cells overlap), the pitch starting at the
-    largest scaled width and doubled until few enough cells remain; the hull, one box, if even
-    a grid as wide as the set has too many (``max_count < 2^d``). ``scale (d,)`` as in
+    median scaled width and doubled until few enough boxes remain (the boxes wider than the
+    pitch kept as they are, beside the cells: a few large boxes, such as those a paving keeps
+    whole, do not make the grid as coarse as they are wide); the hull, one box, if even a
+    grid as wide as the set has too many (``max_count < 2^d``). ``scale (d,)`` as in
     :func:`imagesp` (the pitch is ``p / scale`` per axis). Each step costs ``O(N log N)`` and
     holds at most ``3^d N`` cells (at a pitch no smaller than its width a box meets two cells
     per axis, one more where the outward rounding extends its range)."""
@@ -155,10 +157,13 @@ def coarsen(boxes: np.ndarray, max_count: int, scale: np.ndarray | None = None) 
     scale_d = np.ones(d) if scale is None else np.asarray(scale, dtype=np.float64)
     origin = boxes[..., 0].min(axis=0)
     extent = float(np.max(widths(hull(boxes)[None], scale_d)))
-    pitch = float(np.max(widths(boxes, scale_d)))
+    box_widths = np.max(widths(boxes, scale_d), axis=-1)
+    pitch = float(np.median(box_widths))
     while pitch <= 2.0 * extent and pitch > 0.0:
-        cells = grid_cells(boxes, pitch / scale_d, origin, max_cells=(3**d) * boxes.shape[0])
-        if cells.shape[0] <= max_count:
-            return cells
+        large = box_widths > pitch
+        small = boxes[~large]
+        cells = grid_cells(small, pitch / scale_d, origin, max_cells=(3**d) * small.shape[0])
+        if cells.shape[0] + np.count_nonzero(large) <= max_count:
+            return np.concatenate([cells, boxes[large]])
         pitch *= 2.0
     return hull(boxes)[None]

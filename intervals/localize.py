@@ -21,13 +21,12 @@ from intervals.boxes import (
     DEFAULT_HEADING_SCALE_M_PER_RAD,
     Subpaving,
     as_boxes,
-    max_width,
     pose_scale,
 )
 from intervals.errors import IntervalError
 from intervals.imagesp import coarsen
-from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, sivia
-from intervals.sonar import contractor
+from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, cut_width, sivia
+from intervals.sonar import contractor, idle
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -58,10 +57,12 @@ costs about 5 ms an epoch (more than the rest of the epoch): worth it on thin co
 (``ray_test=True``) on wide ones."""
 
 
-def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool):
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
-    of sensors rejecting each box, and which."""
-    reject, certain = sensor_verdicts(boxes, scan, inner)
+    of sensors rejecting each box, and which. ``probe (N, 3, 2)``: boxes within ``boxes`` whose
+    sensor verdicts hold for them (:func:`intervals.sonar.idle.probes`; None: ``boxes``); the
+    in-room test always sees ``boxes``."""
+    reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner)
     rejects = np.count_nonzero(reject, axis=1)
     out = rejects > q
     inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
@@ -81,6 +82,29 @@ def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
     lo_ok = boxes[:, None, :, 0] <= regions[None, :, :, 1]
     hi_ok = regions[None, :, :, 0] <= boxes[:, None, :, 1]
     return np.any(np.all(lo_ok & hi_ok, axis=2), axis=1)
+
+
+def clip_to_regions(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(clipped (N, d, 2), held (N,) bool)``: each box cut down to the hull of its
+    intersections with ``regions (M, d, 2)`` (closed intervals; a box meeting none becomes an
+    empty row, lower bounds above upper), and whether it lies within one region. Every point
+    of a box that lies in some region stays in its clipped box. ``O(N M)`` in blocks of
+    about 260,000 box-region pairs (some 6 MB an array), for a few regions
+    (:data:`MAX_WITHIN_REGIONS`)."""
+    n, m = boxes.shape[0], regions.shape[0]
+    clipped, held = np.empty_like(boxes), np.zeros(n, dtype=bool)
+    step = max(1, (1 << 18) // max(m, 1))
+    for start in range(0, n, step):
+        b = boxes[start : start + step, None]  # (n', 1, d, 2)
+        lo = np.maximum(b[..., 0], regions[None, :, :, 0])  # (n', M, d)
+        hi = np.minimum(b[..., 1], regions[None, :, :, 1])
+        meets = np.all(lo <= hi, axis=2)[..., None]  # (n', M, 1)
+        part = clipped[start : start + step]
+        part[..., 0] = np.where(meets, lo, np.inf).min(axis=1, initial=np.inf)
+        part[..., 1] = np.where(meets, hi, -np.inf).max(axis=1, initial=-np.inf)
+        inside = (regions[None, :, :, 0] <= b[..., 0]) & (b[..., 1] <= regions[None, :, :, 1])
+        held[start : start + step] = np.any(np.all(inside, axis=2), axis=1)
+    return clipped, held
 
 
 MAX_WITHIN_REGIONS = 256
@@ -129,6 +153,12 @@ def _checked_levels(levels) -> int:
     return int(levels)
 
 
+def _checked_whole_boxes(whole_boxes) -> bool:
+    if not isinstance(whole_boxes, bool):
+        raise IntervalError(f"whole_boxes must be True or False, got {whole_boxes!r}")
+    return whole_boxes
+
+
 def _initial_poses(initial) -> np.ndarray:
     boxes = as_boxes(initial, "initial pose boxes")
     if boxes.shape[1] != 3:
@@ -161,16 +191,19 @@ def _pave(
     contract=True,
     shave_rounds=0,
     tighten_levels=0,
+    whole=False,
+    tests_per_box=TESTS_PER_BOX,
 ):
-    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged)`` with the
-    number of sensors rejecting each boundary box (``merged``: see below), kept from the
-    SIVIA level that stored the box (the boundary boxes are the undecided boxes no wider than
-    ``eps``, in the order SIVIA met them; checked, and recomputed if SIVIA ever stored them
-    otherwise).
+    """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged, held (Ni,))``
+    with the number of sensors rejecting each boundary box (``merged``: see below), kept from
+    the SIVIA level that stored the box (the boundary boxes are the undecided boxes no wider
+    than ``eps``, in the order SIVIA met them; checked, and recomputed if SIVIA ever stored
+    them otherwise), and likewise the number rejecting each inner box (``held``; with
+    ``inner`` only, else empty).
 
     ``max_boxes`` (None: no budget): the budget of :func:`localize`. SIVIA may then test at
-    most :data:`TESTS_PER_BOX` ``* max_boxes`` boxes, best first (the boxes fewest sensors
-    reject first, see :func:`intervals.sivia.sivia`), and hand at most ``max_boxes`` to one
+    most ``tests_per_box`` (default :data:`TESTS_PER_BOX`) ``* max_boxes`` boxes, best first
+    (the boxes fewest sensors reject first, see :func:`intervals.sivia.sivia`), and hand at most ``max_boxes`` to one
     test call. When it is cut short the boxes it left untested (children of undecided boxes)
     are tested once, in chunks, and those the test rejects are dropped (each rejection is
     sound for every pose of the box); only then, if the set still holds more than
@@ -200,6 +233,9 @@ def _pave(
     largest boxes refined first, the rest kept as they are), before any shaving.
     """
     stored, counts, tested = [], [], [0]
+    walls = idle.scan_walls(local) if whole else None
+    still = (lambda b: idle.idle_axes(b, local, walls)) if whole else None
+    held, held_counts = [], []  # the INSIDE boxes (with ``inner``) and their counts, in order
     if within is not None:  # a box meeting none of these holds no pose of the set: OUTSIDE
         within = as_boxes(within, "within")
 
@@ -210,8 +246,12 @@ def _pave(
 
     def sonar_test(b):
         tested[0] += b.shape[0]
-        verdicts, rejects, reject = _test_and_counts(b, local, q, inner)
-        keep = (verdicts == UNDECIDED) & (max_width(b, scale) <= eps)
+        axes = None if still is None else still(b)
+        probe = None if axes is None else idle.probes(b, axes)
+        verdicts, rejects, reject = _test_and_counts(b, local, q, inner, probe)
+        if inner and within is not None:  # in no single region: may hold poses outside them
+            verdicts[(verdicts == INSIDE) & ~clip_to_regions(b, within)[1]] = UNDECIDED
+        keep = (verdicts == UNDECIDED) & (cut_width(b, scale, axes) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
             out = idx[rejects[idx] > q]
@@ -219,7 +259,16 @@ def _pave(
             keep[out] = False
         stored.append(b[keep])
         counts.append(rejects[keep])
+        if inner:
+            held.append(b[verdicts == INSIDE])
+            held_counts.append(rejects[verdicts == INSIDE])
         return verdicts, rejects  # under a budget, the boxes fewest sensors reject go first
+
+    def inner_counts(boxes):  # the count of each INSIDE box (recomputed if not as recorded)
+        done = np.concatenate([*held, boxes[:0]])
+        if np.array_equal(done, boxes):
+            return np.concatenate([*held_counts, np.zeros(0, dtype=np.int64)])
+        return np.count_nonzero(sensor_verdicts(boxes, local, False)[0], axis=1)
 
     def test(b):
         if within is None:
@@ -239,16 +288,14 @@ def _pave(
             keep[idx] = rejects[idx] <= q
         return keep, rejects
 
-    def contracted(b):
-        # boxes meeting no region of ``within`` are OUTSIDE whatever the contractor would
-        # make of them: emptied (NaN rows, dropped by SIVIA) before the rest is contracted
+    def contracted(b):  # the boxes clipped to the regions of ``within``, then by the echoes
         if within is None:
             return contractor.contract(b, local, q)
-        out = np.full(b.shape, np.nan)
-        meets = meets_any(b, within)
-        if meets.any():
-            out[meets] = contractor.contract(b[meets], local, q)
-        return out
+        b = clip_to_regions(b, within)[0]
+        live = np.all(b[..., 0] <= b[..., 1], axis=1)
+        if contract and live.any():
+            b[live] = contractor.contract(b[live], local, q)
+        return b
 
     paving = sivia(
         test,
@@ -258,8 +305,9 @@ def _pave(
         max_boxes=DEFAULT_MAX_BOXES if max_boxes is None else min(max_boxes, DEFAULT_MAX_BOXES),
         splits_per_level=splits_per_level,
         min_level_boxes=MIN_LEVEL_BOXES,
-        max_tested=None if max_boxes is None else TESTS_PER_BOX * max_boxes,
-        contract=contracted if contract else None,
+        max_tested=None if max_boxes is None else int(tests_per_box * max_boxes),
+        contract=contracted if contract or within is not None else None,
+        idle=still,
     )
     kept_cap = max_boxes if max_kept is None else max_kept
     over = max_boxes is not None and paving.outer.shape[0] > kept_cap
@@ -271,7 +319,7 @@ def _pave(
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
         if tighten_levels and paving.boundary.shape[0]:  # within the budget's tests left
-            left = None if max_boxes is None else max(TESTS_PER_BOX * max_boxes - tested[0], 0)
+            left = None if max_boxes is None else max(int(tests_per_box * max_boxes) - tested[0], 0)
             boundary, rejects, seen = tighten(
                 paving.boundary,
                 rejects,
@@ -287,10 +335,10 @@ def _pave(
         n = paving.boundary.shape[0]
         rounds = shave_rounds
         if max_boxes is not None and n:  # within the budget of tests (6 n slices a round)
-            rounds = min(rounds, max(TESTS_PER_BOX * max_boxes - tested[0], 0) // (6 * n))
+            rounds = min(rounds, max(int(tests_per_box * max_boxes) - tested[0], 0) // (6 * n))
         if contract and n and rounds:
             paving, rejects = _shaved(paving, rejects, local, q, rounds, max_boxes)
-        return paving, rejects, False
+        return paving, rejects, False, inner_counts(paving.inner)
 
     def retest(b):  # (kept boxes, their counts): the boxes the test does not reject
         kept, kept_counts = [b[:0]], [np.zeros(0, dtype=np.int64)]
@@ -311,7 +359,7 @@ def _pave(
     if not np.array_equal(done, paving.boundary[: done.shape[0]]):
         done, rejects_done = done[:0], rejects_done[:0]  # not in SIVIA's order: all retested
     # at most as many retests as the budget's tests; boxes beyond are kept whole, untested
-    cap = TESTS_PER_BOX * max_boxes if max_boxes is not None else paving.boundary.shape[0]
+    cap = int(tests_per_box * max_boxes) if max_boxes is not None else paving.boundary.shape[0]
     rest = paving.boundary[done.shape[0] :]
     tested, tested_counts = retest(rest[:cap])
     untested = rest[cap:]
@@ -324,7 +372,7 @@ def _pave(
         cells = coarsen(np.concatenate([inner_boxes, boundary]), kept_cap, scale)
         boundary, rejects = retest(cells)
         inner_boxes, merged = inner_boxes[:0], True
-    return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged
+    return Subpaving(inner_boxes, boundary, coarse=True), rejects, merged, inner_counts(inner_boxes)
 
 
 def _shaved(paving: Subpaving, rejects, local: SonarScan, q: int, rounds, max_boxes):
@@ -441,6 +489,8 @@ def gomne(
     contract: bool = True,
     shave_rounds: int = 0,
     tighten_levels: int = 0,
+    whole_boxes: bool = False,
+    tests_per_box: float = TESTS_PER_BOX,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -461,6 +511,16 @@ def gomne(
     set is the one paved from ``initial`` less what lies outside ``within`` (more regions:
     ignored). A coarse ``S_qmax`` gives a coarse ``S_q``; the tracker's global searches use
     :data:`GLOBAL_SPLITS_PER_LEVEL`.
+    ``whole_boxes``: keep whole the boxes the scan cannot split. The inner acceptance runs in
+    the ``q_max`` pass (with ``inner`` false, ``S_q`` is still read off the counts, the inner
+    boxes' included), so a box every pose of which satisfies all but at most ``q_max``
+    readings (and lies in the room) is kept as an inner box instead of being bisected down to
+    ``eps``; and no box is cut across an axis along which no visible wall changes
+    (:mod:`intervals.sonar.idle`): where the set is large by nature (the sensors out of reach
+    of every wall, or their echoes lost, constrain nothing; a strip along one wall) it is held
+    by a few large boxes. Never a looser set from the first (an inner box lies in the set);
+    the second only chooses where to cut. ``tests_per_box``: with ``max_boxes``, SIVIA tests
+    at most this many times ``max_boxes`` boxes (default :data:`TESTS_PER_BOX`).
     """
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
@@ -468,13 +528,13 @@ def gomne(
     boxes = _initial_poses(initial)
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
-    widest, rejects, merged = _pave(
+    widest, rejects, merged, held = _pave(
         local,
         boxes,
         eps,
         q_max,
         scale,
-        inner,
+        inner or _checked_whole_boxes(whole_boxes),
         splits_per_level,
         uses_ray_test(ray_test, scan.belt),
         max_boxes,
@@ -483,6 +543,8 @@ def gomne(
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
         _checked_levels(tighten_levels),
+        whole_boxes,
+        float(tests_per_box),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
@@ -510,6 +572,12 @@ def gomne(
         # Every box of S_qmax is then a boundary box no wider than eps that passed the
         # in-room test: SIVIA at q < q_max on them would keep exactly those rejected by at most
         # q sensors, so the reject counts of the q_max pass give every S_q without a new pass.
-        q = int(min(rejects.min(), q_max))
-        minimal = Subpaving(widest.inner, widest.boundary[rejects <= q], coarse=widest.coarse)
+        # With whole_boxes, an inner box of S_qmax rejected by at most q sensors is a box S_q
+        # does not reject: kept in S_q's cover (as a boundary box when q < q_max).
+        q = int(min(np.concatenate([rejects, held]).min(), q_max))
+        if q == q_max:
+            minimal = widest
+        else:
+            kept = np.concatenate([widest.inner[held <= q], widest.boundary[rejects <= q]])
+            minimal = Subpaving(widest.inner[:0], kept, coarse=widest.coarse)
     return GomneResult(widest if guaranteed else minimal, q, q_max if guaranteed else q, merged)

@@ -15,7 +15,7 @@ from enum import IntEnum
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, max_width
+from intervals.boxes import Subpaving, as_boxes, bisect, centres, max_width, widths
 from intervals.errors import IntervalError
 
 
@@ -38,6 +38,10 @@ Contractor = Callable[[np.ndarray], np.ndarray]
 """``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row a box inside the input row holding
 every point of it that satisfies the constraints; a row with no such point is marked empty
 (NaN, or a lower bound above the upper)."""
+
+IdleAxes = Callable[[np.ndarray], np.ndarray]
+"""``idle(boxes (N, d, 2)) -> (N, d) bool``: the axes along which cutting a box cannot separate
+points of ``X`` from points outside it (e.g. :func:`intervals.sonar.idle.idle_axes`)."""
 
 DEFAULT_MAX_BOXES = 200_000
 """Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
@@ -70,12 +74,54 @@ def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
     return c[np.all(c[..., 0] <= c[..., 1], axis=1)]  # NaN compares false: dropped too
 
 
-def _split(boxes: np.ndarray, eps: float, scale, times: int, grouped: bool = False) -> np.ndarray:
+def cut_width(boxes: np.ndarray, scale=None, idle: np.ndarray | None = None) -> np.ndarray:
+    """``(N,)`` the largest scaled width of each box ``(N, d, 2)`` over its axes not ``idle
+    (N, d)`` (all axes when None; 0 for a box idle along every axis)."""
+    w = widths(boxes, scale)
+    return np.max(np.where(idle, 0.0, w), axis=-1) if idle is not None else np.max(w, axis=-1)
+
+
+def _bisect_active(boxes: np.ndarray, scale, idle: np.ndarray | None):
+    """:func:`intervals.boxes.bisect` along the widest scaled axis that is not idle."""
+    if idle is None:
+        return bisect(boxes, scale)
+    rows = np.arange(boxes.shape[0])
+    axis = np.argmax(np.where(idle, -1.0, widths(boxes, scale)), axis=-1)
+    cut = centres(boxes)[rows, axis]
+    left, right = boxes.copy(), boxes.copy()
+    left[rows, axis, 1] = cut
+    right[rows, axis, 0] = cut
+    return left, right
+
+
+def _split(
+    boxes: np.ndarray,
+    eps: float,
+    scale,
+    times: int,
+    grouped: bool = False,
+    idle: np.ndarray | None = None,
+) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
-    rounds in all (``grouped``: the children in the order of their parents), in one compiled
-    call (:func:`intervals.bisection.split_rounds`)."""
-    scale = np.ones(boxes.shape[1]) if scale is None else scale
-    out, parents = split_rounds(np.ascontiguousarray(boxes), float(eps), scale, int(times))
+    rounds in all (``grouped``: the children in the order of their parents; ``idle (N, d)``:
+    the axes of each box never cut, inherited by its children). Without idle axes the rounds
+    run in one compiled call (:func:`intervals.bisection.split_rounds`)."""
+    if idle is None or not idle.any():
+        unit = np.ones(boxes.shape[1]) if scale is None else scale
+        out, parents = split_rounds(np.ascontiguousarray(boxes), float(eps), unit, int(times))
+    else:
+        done, todo = [], boxes
+        owned, todo_parents = [], np.arange(boxes.shape[0])
+        for _ in range(times):
+            left, right = _bisect_active(todo, scale, idle[todo_parents])
+            children = np.concatenate([left, right], axis=0)
+            owners = np.concatenate([todo_parents, todo_parents])
+            wide = cut_width(children, scale, idle[owners]) > eps
+            done.append(children[~wide])
+            owned.append(owners[~wide])
+            todo, todo_parents = children[wide], owners[wide]
+        out = np.concatenate([*done, todo], axis=0)
+        parents = np.concatenate([*owned, todo_parents])
     if grouped:
         out = out[np.argsort(parents, kind="stable")]
     return out
@@ -98,6 +144,7 @@ def sivia(
     min_level_boxes: int = 1,
     max_tested: int | None = None,
     contract: Contractor | None = None,
+    idle: IdleAxes | None = None,
 ) -> Subpaving:
     """Pave ``initial`` (one box ``(d, 2)`` or a subpaving ``(N, d, 2)``) with ``test``.
 
@@ -129,6 +176,9 @@ def sivia(
     the boxes it empties are dropped as OUTSIDE, the others tested (and bisected) as
     contracted. Sound when the contractor is: it keeps every point that satisfies the
     constraints, and the test sees only such boxes.
+    ``idle``: an :data:`IdleAxes` (None: none). The undecided boxes are never cut across their
+    idle axes, and a box is small when its other axes are no wider than ``eps`` (a box idle
+    along every axis is kept whole): the cuts are a choice, any choice keeps the set sound.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -181,15 +231,19 @@ def sivia(
         v, scores = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
         undecided = boxes[v == UNDECIDED]
-        small = max_width(undecided, scale) <= eps
+        still = None if idle is None or not undecided.shape[0] else np.asarray(idle(undecided))
+        small = cut_width(undecided, scale, still) <= eps
         boundary.append(undecided[small])
         wide = undecided[~small]
         if wide.shape[0]:
+            wide_idle = None if still is None else still[~small]
             budget = max_tested is not None
             if budget:  # under a budget, the lowest scores' children first
-                wide = wide[np.argsort(scores[v == UNDECIDED][~small], kind="stable")]
+                order = np.argsort(scores[v == UNDECIDED][~small], kind="stable")
+                wide = wide[order]
+                wide_idle = None if wide_idle is None else wide_idle[order]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-            pending.append(_split(wide, eps, scale, splits, grouped=budget))
+            pending.append(_split(wide, eps, scale, splits, grouped=budget, idle=wide_idle))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,

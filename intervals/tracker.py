@@ -71,11 +71,53 @@ from validated_records import bounded, validate_fields
 #: tight and costs no component search).
 SPREAD_FACTOR = 8.0
 
+#: Cells per axis of the grid on which :func:`covered_volume` counts what boxes cover.
+COVER_CELLS = 32
+
+
+def covered_volume(boxes: np.ndarray, cells: int = COVER_CELLS) -> float:
+    """An upper estimate of the volume of the union of ``boxes (N, d, 2)`` that counts
+    overlaps once: each box snapped outward to a grid of ``cells`` per axis over their hull,
+    the cells covered by any box counted (box corners added to a difference array, summed
+    along each axis). ``O(N + cells^d)``. The sum of the volumes (:func:`volume`) counts a
+    region held by overlapping boxes (several initial boxes kept whole) once per box."""
+    whole = hull(boxes)
+    width = whole[:, 1] - whole[:, 0]
+    if not np.all(width > 0):
+        return volume(boxes)
+    d = boxes.shape[1]
+    first = np.clip(np.floor((boxes[..., 0] - whole[:, 0]) / width * cells), 0, cells - 1)
+    last = np.clip(np.ceil((boxes[..., 1] - whole[:, 0]) / width * cells), 1, cells)
+    ends = (first.astype(np.int64), np.maximum(last, first + 1).astype(np.int64))
+    shape = (cells + 1,) * d
+    counts = np.zeros(int(np.prod(shape)), dtype=np.int64)
+    for corner in np.ndindex(*(2,) * d):  # inclusion-exclusion of the 2^d corners
+        index = np.ravel_multi_index(tuple(ends[c][:, a] for a, c in enumerate(corner)), shape)
+        counts += (-1) ** sum(corner) * np.bincount(index, minlength=counts.size)
+    counts = counts.reshape(shape)
+    for axis in range(d):
+        counts = np.cumsum(counts, axis=axis)
+    covered = np.count_nonzero(counts[(slice(0, cells),) * d] > 0)
+    return float(covered * np.prod(width / cells))
+
+
 #: A :class:`Refinement` holds at most this many times ``max_boxes`` boxes (the reported set
 #: at most ``max_boxes``): 9.6 MB at the default 10 000, for one epoch at a time. As many as
 #: SIVIA may test (``TESTS_PER_BOX``): fewer made the refinement of office at ``max_boxes``
 #: 200 merge, and stop, every epoch; with 20 it is fine again by the ninth.
 KEPT_PER_BOX = TESTS_PER_BOX
+
+#: With ``whole_boxes``, a tracking epoch's SIVIA tests at most this many times ``max_boxes``
+#: boxes (global searches and the epochs that continue a :class:`Refinement`:
+#: :data:`intervals.localize.TESTS_PER_BOX`), and none is refined after it: a tracking
+#: set that needs more is large by nature (big_hall with half its echoes lost, where one or two
+#: echoes leave slabs of poses as wide as the prediction), and a depth-first cut at 4 gave on
+#: 30 epochs of it a smaller mean set (285 against 454 m²) in a quarter of the time of 20.
+TRACKING_TESTS_PER_BOX = 4
+
+#: ... but at least this many tests (or ``TESTS_PER_BOX * max_boxes`` if fewer): a small
+#: ``max_boxes`` (office at 200) keeps the budget it had for its tracking sets.
+TRACKING_MIN_TESTS = 40_000
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
@@ -156,8 +198,19 @@ class TrackerSettings:
     ``benchmarks/tightness.py``), for an epoch 2.6 to 6.8 times as dear and a set of tens to
     hundreds of boxes instead of a few."""
 
+    whole_boxes: bool = True
+    """Keep whole the boxes the scan cannot split (``whole_boxes`` of
+    :func:`intervals.localize.gomne`): those proved inside the epoch's ``q_max``-relaxed set,
+    and along the axes where no visible wall changes (:mod:`intervals.sonar.idle`), so that a
+    set large by nature (the sensors see no wall or lose their echoes; a strip along one
+    wall) costs a few boxes. False: every box of the set bisected to ``eps_m``."""
+
     def __post_init__(self) -> None:
         validate_fields(self, IntervalError)
+        if not isinstance(self.whole_boxes, bool):
+            raise IntervalError(
+                f"TrackerSettings.whole_boxes must be True or False, got {self.whole_boxes!r}"
+            )
         if not isinstance(self.ray_test, bool | None):
             raise IntervalError(
                 f"TrackerSettings.ray_test must be True, False or None, got {self.ray_test!r}"
@@ -288,7 +341,10 @@ class IntervalTracker:
         wide = np.zeros(boxes.shape[0], dtype=bool)
         if apart:
             wide = max_width(boxes, pose_scale(s.heading_scale_m_per_rad)) > s.eps_m
-        if not wide.any() and volume(whole[None]) <= SPREAD_FACTOR * volume(boxes):
+        spread = volume(whole[None]) > SPREAD_FACTOR * volume(boxes)
+        if not (spread or wide.any()):  # the sum counts overlaps again: checked on a grid
+            spread = volume(whole[None]) > SPREAD_FACTOR * covered_volume(boxes)
+        if not (spread or wide.any()):
             return whole[None]
         fine = boxes[~wide]
         hulls = component_hulls(fine) if fine.shape[0] else fine
@@ -326,9 +382,16 @@ class IntervalTracker:
         boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
         return wrap_headings(self.limits(hull(boxes)[None], dt_s))
 
-    def _search(self, scan: SonarScan, initial: np.ndarray, splits_per_level: int = 3, within=None):
-        """GOMNE on ``initial`` under the budget, keeping up to :data:`KEPT_PER_BOX`
-        ``* max_boxes`` boxes (for a :class:`Refinement`)."""
+    def _search(
+        self,
+        scan: SonarScan,
+        initial: np.ndarray,
+        splits_per_level: int = 3,
+        within=None,
+        tests_per_box: float = TESTS_PER_BOX,
+    ):
+        """GOMNE on ``initial`` under the budget (``tests_per_box`` tests a box of it), keeping
+        up to :data:`KEPT_PER_BOX` ``* max_boxes`` boxes (for a :class:`Refinement`)."""
         s = self.settings
         return gomne(
             scan,
@@ -345,6 +408,8 @@ class IntervalTracker:
             max_kept=KEPT_PER_BOX * s.max_boxes,
             splits_per_level=splits_per_level,
             within=within,
+            whole_boxes=s.whole_boxes,
+            tests_per_box=tests_per_box,
         )
 
     def step(
@@ -378,13 +443,24 @@ class IntervalTracker:
         else:
             predicted = as_boxes(self.predict(previous, dt_s, apart))
             within = None
-            if s.tracker == Tracker.SIVIA and not apart and predicted.shape[0] > 1:
+            joined = not apart or s.whole_boxes  # overlapping boxes kept whole would overlap
+            if s.tracker == Tracker.SIVIA and joined and predicted.shape[0] > 1:
                 # paved from the whole hull, as for one component (the same bisections, so
                 # never a looser set), every box outside the components' predictions rejected
-                # (with more regions than a test call compares, the hull alone)
-                within = predicted if predicted.shape[0] <= MAX_WITHIN_REGIONS else None
+                # (with more regions than a test call compares, a coarser cover of them)
+                within = predicted
+                if within.shape[0] > MAX_WITHIN_REGIONS:
+                    scale = pose_scale(s.heading_scale_m_per_rad)
+                    within = coarsen(within, MAX_WITHIN_REGIONS, scale)
                 predicted = self._hull_prediction(previous, dt_s)
-            found = self._search(scan, predicted, within=within)
+            # a refinement's chain keeps the full budget (it refines a set cut short for want
+            # of budget, e.g. a global search); other tracking epochs the smaller one
+            cheap = s.whole_boxes and refinement is None
+            tests = float(TESTS_PER_BOX)
+            if cheap:
+                floor = min(float(TESTS_PER_BOX), TRACKING_MIN_TESTS / s.max_boxes)
+                tests = max(float(TRACKING_TESTS_PER_BOX), floor)
+            found = self._search(scan, predicted, within=within, tests_per_box=tests)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)
@@ -394,6 +470,11 @@ class IntervalTracker:
             pending = None  # a fine set, reported whole: an older refinement is done with
         elif found.merged:
             pending = None  # a set the budget had to merge is too large to refine: none
+        elif s.whole_boxes and status == EpochStatus.TRACKING and coarse and refinement is None:
+            # a tracking set the budget cut short is large by nature (its prediction holds it,
+            # as the parts the scan cannot split are kept whole): refining it on its scan next
+            # epoch would double that epoch's cost for a set the next scan paves anyway
+            pending = None
         elif pending is None or not coarse:
             # kept for the next epoch: this set, finer than the report merged to max_boxes
             # (while an older refinement is still coarse, that one goes on instead)
