@@ -47,7 +47,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from _common import machine_line, markdown_table, write_section
+from _common import code_label, machine_line, markdown_table, write_section
 
 #: Variants benchmarked besides the built-in scenarios: name -> (scenario, TOML appended).
 VARIANTS = {
@@ -154,20 +154,6 @@ class Outcome:
     wall_s: float
     peak_mib: float
     summary: dict | None
-
-
-def code_label(tree: Path) -> str:
-    """The tree's commit (``git describe --always --dirty``), or its folder name."""
-    try:
-        done = subprocess.run(
-            ["git", "-C", str(tree), "describe", "--always", "--dirty"],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return done.stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return tree.name
 
 
 def _cap_memory(limit_bytes: int) -> None:

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import machine_line, markdown_table
+from _common import code_label, machine_line, markdown_table
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 SCENARIO_FOLDER = REPOSITORY / "scenarios" / "builtin"
@@ -93,20 +93,6 @@ def child(plan: str, duration_s: float, repeat: int, out: Path) -> int:
     }
     out.write_text(json.dumps(figures), encoding="utf-8")
     return 0
-
-
-def code_label(tree: Path) -> str:
-    """The tree's commit (``git describe --always --dirty``), or its folder name."""
-    try:
-        done = subprocess.run(
-            ["git", "-C", str(tree), "describe", "--always", "--dirty"],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return done.stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return tree.name
 
 
 def run_child(plan: str, duration_s: float, repeat: int, code: Path) -> dict | str:
