@@ -46,9 +46,12 @@ def child(plan: str, duration_s: float, repeat: int, out: Path) -> int:
     from scenarios.spec import parse_scenario
 
     def load(name: str, seconds: float):
-        path = SCENARIO_FOLDER / f"{name}.toml"
-        text = path.read_text(encoding="utf-8")
-        spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=name)
+        from buildings import VARIANTS  # a variant: a built-in plan with settings appended
+
+        base, extra = VARIANTS.get(name, (name, ""))
+        path = SCENARIO_FOLDER / f"{base}.toml"
+        text = path.read_text(encoding="utf-8") + "\n" + extra
+        spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
         return spec.with_run(duration_s=seconds)
 
     def epochs(spec, rounds: int):
@@ -127,7 +130,11 @@ HEADER = [
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("plans", nargs="*", help=f"built-in scenarios (default: {' '.join(PLANS)})")
+    parser.add_argument(
+        "plans",
+        nargs="*",
+        help=f"built-in scenarios or benchmarks/buildings.py variants (default: {' '.join(PLANS)})",
+    )
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each epoch (best kept)")
     parser.add_argument("--compare", type=Path, metavar="DIR", help="another source tree")
