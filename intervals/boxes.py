@@ -11,10 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components as _csgraph_components
-from scipy.spatial import cKDTree
 
 from intervals.errors import IntervalError
 
@@ -186,125 +184,97 @@ def area_xy(boxes: np.ndarray) -> float:
     return float(np.sum(cell_area[covered]))
 
 
-COMPONENT_BRUTE_FORCE_BOXES = 64
-"""Box sets up to this size are compared all pairs with all pairs by
-:func:`touching_pairs` (a tree costs more than it saves)."""
-
-_CANDIDATE_MARGIN = 1e-3
-"""Relative slack of the candidate search of :func:`touching_pairs`, far above its float
-error (see there)."""
-
-
-def _touch_on_axis(lo_a, hi_a, lo_b, hi_b, periodic: bool, period: float) -> np.ndarray:
-    """Closed intervals ``[lo_a, hi_a]`` and ``[lo_b, hi_b]`` meet (``periodic``: also with the
-    first shifted by ``-period`` or ``+period``)."""
-    touch = (lo_a <= hi_b) & (lo_b <= hi_a)
-    if periodic:
-        for shift in (-period, period):
-            touch |= (lo_a + shift <= hi_b) & (lo_b <= hi_a + shift)
-    return touch
+def _sweep_axis(boxes: np.ndarray, periodic_axis: int | None) -> int:
+    """The axis :func:`connected_components` sweeps along: of the non-periodic axes, the one
+    where boxes overlap least, by the estimate ``mean width / extent`` (two boxes of widths
+    ``w_i, w_j`` spread over an extent ``L`` overlap on that axis with probability about
+    ``(w_i + w_j) / L``); the periodic axis only when it is the only one (``d = 1``)."""
+    d = boxes.shape[1]
+    candidates = [a for a in range(d) if a != periodic_axis]
+    if not candidates:
+        return 0
+    lo, hi = boxes[:, candidates, 0], boxes[:, candidates, 1]
+    extent = hi.max(axis=0) - lo.min(axis=0)
+    mean_width = (hi - lo).mean(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        overlap = np.where(extent > 0.0, mean_width / extent, np.inf)
+    return candidates[int(np.argmin(overlap))]
 
 
-def _touching(boxes, i, j, periodic_axis, period) -> np.ndarray:
-    """``(P,)`` bool: boxes ``i[p]`` and ``j[p]`` touch on every axis (the exact test)."""
-    touch = np.ones(i.shape, dtype=bool)
-    for axis in range(boxes.shape[1]):
-        touch &= _touch_on_axis(
-            boxes[i, axis, 0],
-            boxes[i, axis, 1],
-            boxes[j, axis, 0],
-            boxes[j, axis, 1],
-            axis == periodic_axis,
-            period,
-        )
-    return touch
+@numba.njit(cache=True)
+def _find(parent, i):
+    """The root of ``i`` in the union-find forest ``parent (N,)`` (path halving)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
 
 
-def touching_pairs(
-    boxes: np.ndarray, periodic_axis: int | None = None, period: float = 2.0 * np.pi
-) -> tuple[np.ndarray, np.ndarray]:
-    """Every pair of touching boxes of ``(N, d, 2)``: ``(i (P,), j (P,))`` int64 with ``i < j``
-    (closed intervals meeting on every axis, the ``periodic_axis`` also shifted by
-    ``-+period``; each pair once, in no particular order).
+@numba.njit(cache=True)
+def _touch(lo, hi, a, b, periodic_axis, period):
+    """Boxes ``a < b`` (rows of ``lo, hi (N, d)``) touch: their closed intervals meet on every
+    axis, the ``periodic_axis`` (-1: none) also with ``a``'s shifted by ``-period`` or
+    ``+period`` (the float operations of the all-pairs definition, ``lo_a + shift <= hi_b``
+    and ``lo_b <= hi_a + shift``)."""
+    for axis in range(lo.shape[1]):
+        lo_a, hi_a, lo_b, hi_b = lo[a, axis], hi[a, axis], lo[b, axis], hi[b, axis]
+        if lo_a <= hi_b and lo_b <= hi_a:
+            continue
+        if axis != periodic_axis:
+            return False
+        if not (
+            (lo_a - period <= hi_b and lo_b <= hi_a - period)
+            or (lo_a + period <= hi_b and lo_b <= hi_a + period)
+        ):
+            return False
+    return True
 
-    Candidates come from a k-d tree (``scipy.spatial.cKDTree``) and are then decided by the
-    exact test. Two boxes with centres ``c`` and half-widths ``h`` touch only if ``|c_i - c_j|
-    <= h_i + h_j`` on every axis. The "small" boxes, no wider than twice the median half-width
-    on any axis, have ``h <= H`` (their largest half-widths, per axis); scaled by ``1 / (2 H)``
-    per axis, two touching small boxes are within Chebyshev distance 1, which
-    ``query_pairs`` finds (the periodic axis as a torus, ``boxsize``). A wider box ``b`` can only
-    touch small boxes within ``max_a (h_b + H) / (2 H)`` of it (``query_ball_point``); the wider
-    boxes among themselves are paired by the same method, recursively, or by a sweep along
-    the first non-periodic axis when they are more than half of the boxes. Float errors: the
-    computed centres and half-widths are off by a few ulps of the largest coordinate ``M``,
-    and ``H`` is taken at least ``1e-9 (1 + M)``, so the scaled distances of touching boxes
-    exceed their bound by far less than the search radius' slack :data:`_CANDIDATE_MARGIN`:
-    no touching pair is missed. For pavings (boxes of similar sizes, each touching a few
-    neighbours) the time is ``O(N log N)`` and the memory ``O(N)``.
+
+@numba.njit(cache=True)
+def _sweep_components(lo, hi, axis, periodic_axis, period):
+    """``labels (N,)`` of the components of the boxes ``lo, hi (N, d)`` (module doc of
+    :func:`connected_components`): union-find over a sweep along ``axis``.
+
+    The sweep entries are the boxes' intervals on ``axis``, sorted by lower bound (when
+    ``axis`` is the periodic one, also each box's copies shifted by ``-+period``: ``3 N``
+    entries). Each entry meets, on ``axis``, exactly the entries after it whose lower bound is
+    at most its upper bound; those pairs get the exact test :func:`_touch` (the smaller index
+    first) and, when they touch, their trees are joined. Pairs already in one tree are
+    skipped. Time ``O(N log N + C)`` for ``C`` pairs meeting on ``axis``; memory ``O(N)``.
     """
-    n = boxes.shape[0]
-    if n <= COMPONENT_BRUTE_FORCE_BOXES:
-        i, j = np.triu_indices(n, 1)
-        keep = _touching(boxes, i, j, periodic_axis, period)
-        return i[keep].astype(np.int64), j[keep].astype(np.int64)
-    centre = (boxes[..., 0] + boxes[..., 1]) / 2.0
-    half = (boxes[..., 1] - boxes[..., 0]) / 2.0
-    small = np.all(half <= 2.0 * np.median(half, axis=0), axis=1)
-    wide = np.flatnonzero(~small)
-    if 2 * wide.size > n:
-        return sweep_pairs(boxes, periodic_axis, period)
-    narrow = np.flatnonzero(small)
-    extent = 1.0 + float(np.max(np.abs(boxes)))
-    reach = np.maximum(half[narrow].max(axis=0), 1e-9 * extent)  # H, per axis
-    scale = 1.0 / (2.0 * reach)
-    points = centre * scale
-    size = np.zeros(boxes.shape[1])  # 0: not periodic
-    if periodic_axis is not None:
-        torus = period * scale[periodic_axis]
-        wrapped = np.mod(points[:, periodic_axis], torus)
-        points[:, periodic_axis] = np.where(wrapped < torus, wrapped, 0.0)
-        size[periodic_axis] = torus
-    tree = cKDTree(points[narrow], boxsize=size)
-    radius = 1.0 + _CANDIDATE_MARGIN
-    found = tree.query_pairs(radius, p=np.inf, output_type="ndarray")
-    firsts, seconds = [narrow[found[:, 0]]], [narrow[found[:, 1]]]
-    if wide.size:
-        ball = np.max((half[wide] + reach) * scale, axis=1) * radius
-        near = tree.query_ball_point(points[wide], ball, p=np.inf, return_sorted=False)
-        counts = np.array([len(found) for found in near], dtype=np.int64)
-        firsts.append(np.repeat(wide, counts))
-        seconds.append(narrow[np.concatenate([np.asarray(f, dtype=np.int64) for f in near])])
-        among_i, among_j = touching_pairs(boxes[wide], periodic_axis, period)
-        firsts.append(wide[among_i])
-        seconds.append(wide[among_j])
-    i, j = np.concatenate(firsts), np.concatenate(seconds)
-    i, j = np.minimum(i, j), np.maximum(i, j)
-    keep = _touching(boxes, i, j, periodic_axis, period)
-    return i[keep].astype(np.int64), j[keep].astype(np.int64)
-
-
-def sweep_pairs(boxes, periodic_axis, period) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`touching_pairs` by sweep and prune along the first non-periodic axis (boxes
-    sorted by lower bound: each meets, on that axis, the boxes after it whose lower bound is at
-    most its upper bound; with one periodic axis alone, also their copies shifted by
-    ``-+period``). ``O(N log N + C)`` for ``C`` candidate pairs on that axis."""
-    n, d = boxes.shape[0], boxes.shape[1]
-    axis = next((a for a in range(d) if a != periodic_axis), 0)
-    lo, hi = boxes[:, axis, 0], boxes[:, axis, 1]
-    owner = np.arange(n)
-    if axis == periodic_axis:
-        owner = np.tile(owner, 3)
-        shift = np.repeat([0.0, -period, period], n)
-        lo, hi = np.tile(lo, 3) + shift, np.tile(hi, 3) + shift
-    order = np.argsort(lo, kind="stable")
-    ends = np.searchsorted(lo[order], hi[order], side="right")
-    counts = ends - np.arange(order.size) - 1
-    first = np.repeat(np.arange(order.size), counts)
-    second = first + 1 + np.arange(first.size) - np.repeat(np.cumsum(counts) - counts, counts)
-    i, j = owner[order[first]], owner[order[second]]
-    i, j = np.minimum(i, j), np.maximum(i, j)
-    keep = (i != j) & _touching(boxes, i, j, periodic_axis, period)
-    return i[keep], j[keep]
+    n = lo.shape[0]
+    copies = 3 if axis == periodic_axis else 1
+    entry_lo = np.empty(copies * n)
+    entry_hi = np.empty(copies * n)
+    owner = np.empty(copies * n, dtype=np.int64)
+    for c in range(copies):
+        shift = (0.0, -period, period)[c]
+        for i in range(n):
+            entry_lo[c * n + i] = lo[i, axis] + shift
+            entry_hi[c * n + i] = hi[i, axis] + shift
+            owner[c * n + i] = i
+    order = np.argsort(entry_lo)
+    sorted_lo, sorted_hi, sorted_owner = entry_lo[order], entry_hi[order], owner[order]
+    parent = np.arange(n)
+    for e in range(order.size):
+        top, p = sorted_hi[e], sorted_owner[e]
+        for f in range(e + 1, order.size):
+            if sorted_lo[f] > top:
+                break
+            q = sorted_owner[f]
+            root_p, root_q = _find(parent, p), _find(parent, q)
+            if root_p == root_q or not _touch(lo, hi, min(p, q), max(p, q), periodic_axis, period):
+                continue
+            parent[max(root_p, root_q)] = min(root_p, root_q)
+    labels = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for i in range(n):  # numbered in the order of each component's first box
+        root = _find(parent, i)
+        if labels[root] < 0:
+            labels[root] = count
+            count += 1
+        labels[i] = labels[root]
+    return labels
 
 
 def connected_components(
@@ -316,20 +286,88 @@ def connected_components(
     shared corner connects). ``periodic_axis`` (the heading, axis 2 of pose boxes) is compared
     modulo ``period`` as well (intervals also shifted by ``-+period``), so boxes at
     ``theta = -pi`` and ``theta = pi`` join. Returns ``(count, labels (N,))``, labels
-    ``0..count-1`` numbered in the order of each component's first box. The touching pairs
-    come from :func:`touching_pairs` (``O(N log N)`` for pavings, never an ``N x N`` array),
-    the components from ``scipy.sparse.csgraph.connected_components``.
+    ``0..count-1`` numbered in the order of each component's first box.
+
+    A compiled union-find over a sweep (:func:`_sweep_components`) along the axis where the
+    boxes overlap least (:func:`_sweep_axis`): ``O(N log N)`` time for pavings (each box
+    meeting, on that axis, a bounded share of the others; ``O(N log N + C)`` for ``C`` pairs
+    meeting there in general) and ``O(N)`` memory, never an ``N x N`` array.
     """
     n = boxes.shape[0]
     if n == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    i, j = touching_pairs(boxes, periodic_axis, period)
-    graph = coo_matrix((np.ones(i.size, dtype=np.int8), (i, j)), shape=(n, n))
-    count, labels = _csgraph_components(graph, directed=False)
-    _, first_box, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.empty(first_box.size, dtype=np.int64)
-    rank[np.argsort(first_box, kind="stable")] = np.arange(first_box.size)
-    return int(count), rank[inverse]
+    lo, hi = _bounds(boxes)
+    periodic = -1 if periodic_axis is None else int(periodic_axis)
+    axis = _sweep_axis(boxes, periodic_axis)
+    labels = _sweep_components(lo, hi, axis, periodic, float(period))
+    return int(labels.max()) + 1, labels
+
+
+@numba.njit(cache=True)
+def _meets(lo, hi, region_lo, region_hi, i, r):
+    """Box ``i`` of ``lo, hi (N, d)`` meets region ``r`` of ``region_lo, region_hi (M, d)``
+    (closed intervals, every axis)."""
+    for a in range(lo.shape[1]):
+        if max(lo[i, a], region_lo[r, a]) > min(hi[i, a], region_hi[r, a]):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _clip_into(lo, hi, region_lo, region_hi, clipped_lo, clipped_hi, held):
+    """:func:`clip_to_boxes` on ``lo, hi (N, d)`` and ``region_lo, region_hi (M, d)``, into
+    ``clipped_lo, clipped_hi (N, d)`` (initialised ``+inf``, ``-inf``) and ``held (N,)``."""
+    for i in range(lo.shape[0]):
+        for r in range(region_lo.shape[0]):
+            if not _meets(lo, hi, region_lo, region_hi, i, r):
+                continue
+            inside = True
+            for a in range(lo.shape[1]):
+                inside &= region_lo[r, a] <= lo[i, a] and hi[i, a] <= region_hi[r, a]
+                clipped_lo[i, a] = min(clipped_lo[i, a], max(lo[i, a], region_lo[r, a]))
+                clipped_hi[i, a] = max(clipped_hi[i, a], min(hi[i, a], region_hi[r, a]))
+            held[i] |= inside
+
+
+@numba.njit(cache=True)
+def _meets_any(lo, hi, region_lo, region_hi):
+    """:func:`meets_any_box` on ``lo, hi (N, d)`` and ``region_lo, region_hi (M, d)``."""
+    out = np.zeros(lo.shape[0], dtype=np.bool_)
+    for i in range(lo.shape[0]):
+        for r in range(region_lo.shape[0]):
+            if _meets(lo, hi, region_lo, region_hi, i, r):
+                out[i] = True
+                break
+    return out
+
+
+def _bounds(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo (N, d), hi (N, d))``: the bounds of ``boxes (N, d, 2)``, contiguous float64 (for
+    the compiled loops)."""
+    return (
+        np.ascontiguousarray(boxes[..., 0], dtype=np.float64),
+        np.ascontiguousarray(boxes[..., 1], dtype=np.float64),
+    )
+
+
+def meets_any_box(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the box of ``boxes (N, d, 2)`` meets (closed intervals) at least one of
+    ``regions (M, d, 2)``. A compiled loop over the ``N M`` pairs, ``O(N)`` memory."""
+    return _meets_any(*_bounds(boxes), *_bounds(regions))
+
+
+def clip_to_boxes(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(clipped (N, d, 2), held (N,) bool)``: each box of ``boxes (N, d, 2)`` cut down to the
+    hull of its intersections with ``regions (M, d, 2)`` (closed intervals; a box meeting none
+    becomes an empty row, lower bounds ``+inf`` above upper bounds ``-inf``), and whether it
+    lies within one region. Every point of a box that lies in some region stays in its clipped
+    box (the bounds are maxima and minima of the given bounds: no rounding). A compiled loop
+    over the ``N M`` pairs, ``O(N)`` memory."""
+    lo, hi = _bounds(boxes)
+    clipped_lo, clipped_hi = np.full_like(lo, np.inf), np.full_like(hi, -np.inf)
+    held = np.zeros(lo.shape[0], dtype=np.bool_)
+    _clip_into(lo, hi, *_bounds(regions), clipped_lo, clipped_hi, held)
+    return np.stack([clipped_lo, clipped_hi], axis=-1), held
 
 
 def merge_adjacent(boxes: np.ndarray, rounds: int = 2) -> np.ndarray:

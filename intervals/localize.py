@@ -21,6 +21,8 @@ from intervals.boxes import (
     DEFAULT_HEADING_SCALE_M_PER_RAD,
     Subpaving,
     as_boxes,
+    clip_to_boxes,
+    meets_any_box,
     pose_scale,
 )
 from intervals.errors import IntervalError
@@ -78,33 +80,19 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
 
 def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: the box meets (closed intervals) at least one of ``regions (M, d, 2)``;
-    ``O(N M)``, for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
-    lo_ok = boxes[:, None, :, 0] <= regions[None, :, :, 1]
-    hi_ok = regions[None, :, :, 0] <= boxes[:, None, :, 1]
-    return np.any(np.all(lo_ok & hi_ok, axis=2), axis=1)
+    ``O(N M)`` (:func:`intervals.boxes.meets_any_box`), for a few regions
+    (:data:`MAX_WITHIN_REGIONS`)."""
+    return meets_any_box(boxes, regions)
 
 
 def clip_to_regions(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(clipped (N, d, 2), held (N,) bool)``: each box cut down to the hull of its
     intersections with ``regions (M, d, 2)`` (closed intervals; a box meeting none becomes an
     empty row, lower bounds above upper), and whether it lies within one region. Every point
-    of a box that lies in some region stays in its clipped box. ``O(N M)`` in blocks of
-    about 260,000 box-region pairs (some 6 MB an array), for a few regions
+    of a box that lies in some region stays in its clipped box. ``O(N M)`` time, ``O(N)``
+    memory (:func:`intervals.boxes.clip_to_boxes`), for a few regions
     (:data:`MAX_WITHIN_REGIONS`)."""
-    n, m = boxes.shape[0], regions.shape[0]
-    clipped, held = np.empty_like(boxes), np.zeros(n, dtype=bool)
-    step = max(1, (1 << 18) // max(m, 1))
-    for start in range(0, n, step):
-        b = boxes[start : start + step, None]  # (n', 1, d, 2)
-        lo = np.maximum(b[..., 0], regions[None, :, :, 0])  # (n', M, d)
-        hi = np.minimum(b[..., 1], regions[None, :, :, 1])
-        meets = np.all(lo <= hi, axis=2)[..., None]  # (n', M, 1)
-        part = clipped[start : start + step]
-        part[..., 0] = np.where(meets, lo, np.inf).min(axis=1, initial=np.inf)
-        part[..., 1] = np.where(meets, hi, -np.inf).max(axis=1, initial=-np.inf)
-        inside = (regions[None, :, :, 0] <= b[..., 0]) & (b[..., 1] <= regions[None, :, :, 1])
-        held[start : start + step] = np.any(np.all(inside, axis=2), axis=1)
-    return clipped, held
+    return clip_to_boxes(boxes, regions)
 
 
 MAX_WITHIN_REGIONS = 256

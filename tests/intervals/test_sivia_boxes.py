@@ -326,29 +326,40 @@ def _random_grid_boxes(rng, n, d, cells):
     return np.stack([lo, lo + width], axis=-1).astype(float)
 
 
-@pytest.mark.parametrize("brute_force_boxes", [bx.COMPONENT_BRUTE_FORCE_BOXES, 0])
-def test_components_equal_the_all_pairs_partition(monkeypatch, brute_force_boxes):
-    """Random box sets (2 and 3 axes, with and without a periodic heading) give the partition
-    and the labels of the all-pairs definition, corner contacts included, both with the
-    all-pairs comparison of small sets and with the k-d tree on every set (threshold 0)."""
-    monkeypatch.setattr(bx, "COMPONENT_BRUTE_FORCE_BOXES", brute_force_boxes)
+def _components_every_sweep_axis(boxes, periodic_axis=None, period=2.0 * np.pi):
+    """``[(count, labels)]``: :func:`bx.connected_components`, then its sweep along each axis
+    in turn (the periodic one included: the sweep over shifted copies)."""
+    found = [bx.connected_components(boxes, periodic_axis, period)]
+    lo = np.ascontiguousarray(boxes[..., 0])
+    hi = np.ascontiguousarray(boxes[..., 1])
+    periodic = -1 if periodic_axis is None else periodic_axis
+    for axis in range(boxes.shape[1]):
+        labels = bx._sweep_components(lo, hi, axis, periodic, period)
+        found.append((int(labels.max()) + 1, labels))
+    return found
+
+
+def test_components_equal_the_all_pairs_partition():
+    """Random box sets (1, 2 and 3 axes, with and without a periodic heading; flat boxes, shared
+    faces, edges and corners common) give the partition and the labels of the all-pairs
+    definition, with the sweep along every axis."""
     rng = np.random.default_rng(5)
     corner = np.array([[[0, 1], [0, 1]], [[1, 2], [1, 2]], [[2.5, 3], [0, 1]]], dtype=float)
     count, labels = bx.connected_components(corner)  # a shared corner connects
     assert count == 2 and tuple(labels) == (0, 0, 1)
-    for trial in range(300):
-        d = 2 + trial % 2
-        boxes = _random_grid_boxes(rng, int(rng.integers(1, 60)), d, int(rng.integers(3, 15)))
+    for trial in range(400):
+        d = 1 + trial % 3
+        boxes = _random_grid_boxes(rng, int(rng.integers(1, 80)), d, int(rng.integers(3, 15)))
         periodic = None
-        if d == 3 and trial % 4 == 1:  # headings on a turn of 8 units near the cut
-            periodic = 2
-            boxes[:, 2] = boxes[:, 2] % 8 - 4
-            boxes[:, 2, 1] = np.maximum(boxes[:, 2, 1], boxes[:, 2, 0])
+        if trial % 4 == 1:  # headings on a turn of 8 units near the cut
+            periodic = d - 1
+            boxes[:, periodic] = boxes[:, periodic] % 8 - 4
+            boxes[:, periodic, 1] = np.maximum(boxes[:, periodic, 1], boxes[:, periodic, 0])
         period = 8.0 if periodic is not None else 2.0 * np.pi
-        count, labels = bx.connected_components(boxes, periodic, period)
         expected_count, expected = _brute_components(boxes, periodic, period)
-        assert count == expected_count
-        np.testing.assert_array_equal(labels, expected)  # same partition, same numbering
+        for count, labels in _components_every_sweep_axis(boxes, periodic, period):
+            assert count == expected_count
+            np.testing.assert_array_equal(labels, expected)  # same partition, same numbering
 
 
 def test_components_of_one_periodic_axis():
@@ -379,35 +390,52 @@ def test_components_of_a_large_paving():
     np.testing.assert_array_equal(labels, iy[keep] // 7)
 
 
-def _pair_set(i, j):
-    return set(zip(i.tolist(), j.tolist(), strict=True))
-
-
 @pytest.mark.slow
-def test_touching_pairs_of_mixed_sizes_and_by_sweep():
-    """Float boxes of sizes spread over three orders of magnitude (the wide boxes take the
-    recursive and the ball searches; sets where most boxes are wide take the sweep), with and
-    without a periodic heading: exactly the pairs of the all-pairs definition."""
+def test_components_of_mixed_sizes():
+    """Float boxes of sizes spread over three orders of magnitude (a paving's boxes, some of
+    them flat, and wide ones), with and without a periodic heading: the partition and labels
+    of the all-pairs definition, with the sweep along every axis."""
     rng = np.random.default_rng(11)
     for trial in range(120):
         n = int(rng.integers(65, 1500))
         lo = rng.uniform(-3.0, 3.0, size=(n, 3))
-        width = rng.uniform(0.05, 0.1, size=(n, 3))  # a paving's boxes, some of them flat
+        width = rng.uniform(0.05, 0.1, size=(n, 3))
         width[rng.uniform(size=n) < 0.05] = 0.0
         wide = rng.uniform(size=n) < (0.15, 0.6, 0.0)[trial % 3]
         width[wide] = 10.0 ** rng.uniform(-1, 0.5, size=(np.count_nonzero(wide), 3))
         boxes = np.stack([lo, lo + width], axis=-1)
         periodic = 2 if trial % 2 else None
-        lo_t, hi_t = boxes[:, None, :, 0], boxes[:, None, :, 1]
-        touch = (lo_t <= np.swapaxes(hi_t, 0, 1)) & (np.swapaxes(lo_t, 0, 1) <= hi_t)
-        if periodic is not None:
-            for shift in (-2.0 * np.pi, 2.0 * np.pi):
-                a = lo_t[..., 2] + shift <= np.swapaxes(hi_t, 0, 1)[..., 2]
-                touch[..., 2] |= a & (np.swapaxes(lo_t, 0, 1)[..., 2] <= hi_t[..., 2] + shift)
-        i, j = np.nonzero(np.triu(np.all(touch, axis=-1), 1))
-        expected = _pair_set(i, j)
-        assert _pair_set(*bx.touching_pairs(boxes, periodic)) == expected
-        assert _pair_set(*bx.sweep_pairs(boxes, periodic, 2.0 * np.pi)) == expected
+        expected_count, expected = _brute_components(boxes, periodic)
+        for count, labels in _components_every_sweep_axis(boxes, periodic):
+            assert count == expected_count
+            np.testing.assert_array_equal(labels, expected)
+
+
+def test_clip_to_boxes_and_meets_any_box_equal_the_definitions():
+    """Random boxes and regions on a small grid (touching faces and flat boxes common): the
+    clipped boxes are the hulls of the intersections (empty rows ``+inf, -inf`` for a box
+    meeting no region), ``held`` says a region contains the box, ``meets_any_box`` says a
+    region meets it; every grid point of a box lying in a region stays in its clipped box."""
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        boxes = _random_grid_boxes(rng, int(rng.integers(0, 60)), 3, 8)
+        regions = _random_grid_boxes(rng, int(rng.integers(1, 20)), 3, 8)
+        clipped, held = bx.clip_to_boxes(boxes, regions)
+        lo = np.maximum(boxes[:, None, :, 0], regions[None, :, :, 0])  # (N, M, d)
+        hi = np.minimum(boxes[:, None, :, 1], regions[None, :, :, 1])
+        meets = np.all(lo <= hi, axis=2)
+        np.testing.assert_array_equal(bx.meets_any_box(boxes, regions), meets.any(axis=1))
+        expected_lo = np.where(meets[..., None], lo, np.inf).min(axis=1, initial=np.inf)
+        expected_hi = np.where(meets[..., None], hi, -np.inf).max(axis=1, initial=-np.inf)
+        np.testing.assert_array_equal(clipped[..., 0], expected_lo)
+        np.testing.assert_array_equal(clipped[..., 1], expected_hi)
+        inside = bx.contains_boxes(regions[None], boxes[:, None])  # (N, M)
+        np.testing.assert_array_equal(held, inside.any(axis=1))
+        points = rng.integers(0, 10, size=(200, 3)).astype(float)
+        in_region = bx.contains_points(regions, points).any(axis=0)  # (P,)
+        for box, clip in zip(boxes, clipped, strict=True):
+            kept = bx.contains_points(box[None], points)[0] & in_region
+            assert bx.contains_points(clip[None], points[kept]).all()
 
 
 def test_merge_adjacent_keeps_the_union_exactly_in_fewer_boxes():
