@@ -307,7 +307,7 @@ def connected_components(
 def _meets(lo, hi, region_lo, region_hi, i, r):
     """Box ``i`` of ``lo, hi (N, d)`` meets region ``r`` of ``region_lo, region_hi (M, d)``
     (closed intervals, every axis)."""
-    for a in range(lo.shape[1]):
+    for a in range(lo.shape[1]):  # noqa: SIM110 (numba compiles no all() of a generator)
         if max(lo[i, a], region_lo[r, a]) > min(hi[i, a], region_hi[r, a]):
             return False
     return True

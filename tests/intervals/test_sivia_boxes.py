@@ -417,7 +417,7 @@ def test_clip_to_boxes_and_meets_any_box_equal_the_definitions():
     meeting no region), ``held`` says a region contains the box, ``meets_any_box`` says a
     region meets it; every grid point of a box lying in a region stays in its clipped box."""
     rng = np.random.default_rng(12)
-    for trial in range(300):
+    for _ in range(300):
         boxes = _random_grid_boxes(rng, int(rng.integers(0, 60)), 3, 8)
         regions = _random_grid_boxes(rng, int(rng.integers(1, 20)), 3, 8)
         clipped, held = bx.clip_to_boxes(boxes, regions)
