@@ -10,6 +10,7 @@ To compare a heading width with position widths, widths are multiplied by a per-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -411,6 +412,12 @@ def component_hulls(boxes: np.ndarray, periodic_axis: int | None = 2) -> np.ndar
         first[labels[::-1]] = np.arange(labels.size)[::-1]  # each component's first box
         own = boxes[first[labels], periodic_axis]
         boxes = unwrap_headings(boxes, (own[:, 0] + own[:, 1]) / 2.0, periodic_axis)
+    return group_hulls(boxes, labels, count)
+
+
+def group_hulls(boxes: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+    """``(count, d, 2)``: the hull of the boxes ``(N, d, 2)`` of each label ``0..count-1``
+    (``labels (N,)``, every label present); ``O(N log N)`` (the boxes sorted by label)."""
     order = np.argsort(labels, kind="stable")
     starts = np.searchsorted(labels[order], np.arange(count))
     lo = np.minimum.reduceat(boxes[order, :, 0], starts, axis=0)
@@ -463,8 +470,20 @@ class Subpaving:
         return area_xy(self.outer)
 
     def components(self, periodic_axis: int | None = 2) -> tuple[int, np.ndarray]:
-        """Connected components of the outer boxes (heading axis periodic by default)."""
+        """Connected components of the outer boxes (heading axis periodic by default):
+        ``(count, labels (N,))``, labels read-only. The default's are computed once per
+        subpaving (the fusion, the epoch log and the recording all ask for them)."""
+        if periodic_axis == 2:
+            return self._heading_components
+        return self._components(periodic_axis)
+
+    @cached_property
+    def _heading_components(self) -> tuple[int, np.ndarray]:
+        return self._components(2)
+
+    def _components(self, periodic_axis: int | None) -> tuple[int, np.ndarray]:
         outer = self.outer
         use = periodic_axis is not None and outer.shape[1] > periodic_axis
-        axis = periodic_axis if use else None
-        return connected_components(outer, periodic_axis=axis)
+        count, labels = connected_components(outer, periodic_axis if use else None)
+        labels.flags.writeable = False
+        return count, labels

@@ -44,6 +44,7 @@ from typing import Literal
 import numpy as np
 from scipy.special import erfcx, ndtr
 
+from intervals.boxes import group_hulls
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.linalg import wrap_angle
@@ -139,19 +140,17 @@ def nearest_component(points, boxes, labels) -> tuple[np.ndarray, np.ndarray, np
 
     Returns:
         ``label (P,)``, ``distance_m (P,)`` to the union of that component's boxes, and the
-        component's hull ``(P, 3, 2)``.
+        component's hull ``(P, 3, 2)``. ``O(P K + K log K)`` time and ``O(P K + C)`` memory
+        for ``C`` components.
     """
     points = np.asarray(points, dtype=float)
     names, member = np.unique(labels, return_inverse=True)  # components sorted by label
-    distance = box_distance(points, boxes)  # (P, K)
-    in_component = member[None, :, None] == np.arange(len(names))[None, None, :]  # (1, K, C)
-    per_component = np.where(in_component, distance[:, :, None], np.inf).min(axis=1)  # (P, C)
+    order = np.argsort(member, kind="stable")  # the boxes grouped by component
+    starts = np.searchsorted(member[order], np.arange(len(names)))  # (C,) each group's first
+    distance = box_distance(points, boxes[order])  # (P, K)
+    per_component = np.minimum.reduceat(distance, starts, axis=1)  # (P, C)
     chosen = np.argmin(per_component, axis=1)  # first = smallest label on ties
-    lower = np.where(in_component[..., None], boxes[:, None, :, 0][None], np.inf).min(
-        axis=1
-    )  # (1, C, 3)
-    upper = np.where(in_component[..., None], boxes[:, None, :, 1][None], -np.inf).max(axis=1)
-    hulls = np.stack([lower[0], upper[0]], axis=-1)  # (C, 3, 2)
+    hulls = group_hulls(boxes, member, len(names))  # (C, 3, 2)
     return names[chosen], per_component[np.arange(len(points)), chosen], hulls[chosen]
 
 

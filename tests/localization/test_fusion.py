@@ -16,6 +16,7 @@ from scipy.stats import truncnorm
 from localization.errors import EstimationError
 from localization.fusion import (
     FusionRule,
+    box_distance,
     clamp_heading,
     fuse,
     nearest_component,
@@ -235,3 +236,26 @@ def test_every_rule_keeps_the_fused_position_in_the_box():
             assert (after.mean[:, :2] >= box[0, :2, 0]).all() and (
                 after.mean[:, :2] <= box[0, :2, 1]
             ).all()
+
+
+def test_nearest_component_equals_the_per_component_definition():
+    """Random boxes with unsorted, non-contiguous labels and several points: the label, the
+    distance to the nearest box of that component and its hull, as computed component by
+    component (ties to the smallest label)."""
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        k = int(rng.integers(1, 40))
+        lo = rng.integers(0, 10, size=(k, 3)).astype(float)
+        boxes = np.stack([lo, lo + rng.integers(0, 3, size=(k, 3))], axis=-1)
+        labels = rng.choice([7, 3, 11, 0, 5], size=k)
+        points = rng.uniform(-2.0, 12.0, size=(5, 2))
+        label, distance, hull = nearest_component(points, boxes, labels)
+        names = np.unique(labels)
+        per = np.array([box_distance(points, boxes[labels == c]).min(axis=1) for c in names]).T
+        best = np.argmin(per, axis=1)
+        np.testing.assert_array_equal(label, names[best])
+        np.testing.assert_array_equal(distance, per[np.arange(5), best])
+        for p, c in enumerate(names[best]):
+            mine = boxes[labels == c]
+            expected = np.stack([mine[..., 0].min(axis=0), mine[..., 1].max(axis=0)], axis=-1)
+            np.testing.assert_array_equal(hull[p], expected)
