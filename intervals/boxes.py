@@ -185,21 +185,29 @@ def area_xy(boxes: np.ndarray) -> float:
     return float(np.sum(cell_area[covered]))
 
 
-def _sweep_axis(boxes: np.ndarray, periodic_axis: int | None) -> int:
-    """The axis :func:`connected_components` sweeps along: of the non-periodic axes, the one
-    where boxes overlap least, by the estimate ``mean width / extent`` (two boxes of widths
-    ``w_i, w_j`` spread over an extent ``L`` overlap on that axis with probability about
-    ``(w_i + w_j) / L``); the periodic axis only when it is the only one (``d = 1``)."""
-    d = boxes.shape[1]
+def _sweep_axes(boxes: np.ndarray, periodic_axis: int | None) -> tuple[int, int, int]:
+    """``(axis, slab_axis, slabs)`` for :func:`_sweep_components`.
+
+    ``axis``: of the non-periodic axes, the one where boxes overlap least, by the estimate
+    ``mean width / extent`` (two boxes of widths ``w_i, w_j`` spread over an extent ``L``
+    overlap on that axis with probability about ``(w_i + w_j) / L``); the periodic axis only
+    when it is the only one (``d = 1``). ``slab_axis``: the next such non-periodic axis (-1:
+    none), cut into ``slabs = extent / mean width`` slabs (at most ``N``): each box lies in at
+    most ``width / slab + 2`` of them, so the slabs hold at most ``3 N`` entries in all."""
+    n, d = boxes.shape[0], boxes.shape[1]
     candidates = [a for a in range(d) if a != periodic_axis]
     if not candidates:
-        return 0
+        return 0, -1, 1
     lo, hi = boxes[:, candidates, 0], boxes[:, candidates, 1]
     extent = hi.max(axis=0) - lo.min(axis=0)
     mean_width = (hi - lo).mean(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         overlap = np.where(extent > 0.0, mean_width / extent, np.inf)
-    return candidates[int(np.argmin(overlap))]
+    ranked = np.argsort(overlap, kind="stable")
+    if len(candidates) == 1 or not np.isfinite(overlap[ranked[1]]):
+        return candidates[int(ranked[0])], -1, 1
+    slabs = int(min(n, np.floor(1.0 / max(overlap[ranked[1]], 1.0 / n))))
+    return candidates[int(ranked[0])], candidates[int(ranked[1])], max(slabs, 1)
 
 
 @numba.njit(cache=True)
@@ -232,41 +240,86 @@ def _touch(lo, hi, a, b, periodic_axis, period):
 
 
 @numba.njit(cache=True)
-def _sweep_components(lo, hi, axis, periodic_axis, period):
-    """``labels (N,)`` of the components of the boxes ``lo, hi (N, d)`` (module doc of
-    :func:`connected_components`): union-find over a sweep along ``axis``.
-
-    The sweep entries are the boxes' intervals on ``axis``, sorted by lower bound (when
-    ``axis`` is the periodic one, also each box's copies shifted by ``-+period``: ``3 N``
-    entries). Each entry meets, on ``axis``, exactly the entries after it whose lower bound is
-    at most its upper bound; those pairs get the exact test :func:`_touch` (the smaller index
-    first) and, when they touch, their trees are joined. Pairs already in one tree are
-    skipped. Time ``O(N log N + C)`` for ``C`` pairs meeting on ``axis``; memory ``O(N)``.
-    """
+def _slab_entries(lo, hi, axis, slab_axis, slabs, periodic_axis, period):
+    """``(entry_lo, entry_hi, owner, slab_start)``: the sweep entries of
+    :func:`_sweep_components` grouped by slab (slab ``k``: entries ``slab_start[k]`` to
+    ``slab_start[k + 1] - 1``), each slab's sorted by lower bound on ``axis``."""
     n = lo.shape[0]
     copies = 3 if axis == periodic_axis else 1
-    entry_lo = np.empty(copies * n)
-    entry_hi = np.empty(copies * n)
-    owner = np.empty(copies * n, dtype=np.int64)
+    base_lo = np.empty(copies * n)
+    base_hi = np.empty(copies * n)
+    base_owner = np.empty(copies * n, dtype=np.int64)
     for c in range(copies):
         shift = (0.0, -period, period)[c]
         for i in range(n):
-            entry_lo[c * n + i] = lo[i, axis] + shift
-            entry_hi[c * n + i] = hi[i, axis] + shift
-            owner[c * n + i] = i
-    order = np.argsort(entry_lo)
-    sorted_lo, sorted_hi, sorted_owner = entry_lo[order], entry_hi[order], owner[order]
-    parent = np.arange(n)
+            base_lo[c * n + i] = lo[i, axis] + shift
+            base_hi[c * n + i] = hi[i, axis] + shift
+            base_owner[c * n + i] = i
+    order = np.argsort(base_lo)
+    first = np.zeros(order.size, dtype=np.int64)
+    last = np.zeros(order.size, dtype=np.int64)
+    if slab_axis >= 0:
+        bottom, top = lo[:, slab_axis].min(), hi[:, slab_axis].max()
+        height = (top - bottom) / slabs
+        for e in range(order.size if height > 0.0 else 0):  # else every box in slab 0
+            i = base_owner[e]
+            first[e] = min(max(int(np.floor((lo[i, slab_axis] - bottom) / height)), 0), slabs - 1)
+            last[e] = min(max(int(np.floor((hi[i, slab_axis] - bottom) / height)), 0), slabs - 1)
+    slab_start = np.zeros(slabs + 1, dtype=np.int64)  # a counting sort by slab, stable
     for e in range(order.size):
-        top, p = sorted_hi[e], sorted_owner[e]
-        for f in range(e + 1, order.size):
-            if sorted_lo[f] > top:
-                break
-            q = sorted_owner[f]
-            root_p, root_q = _find(parent, p), _find(parent, q)
-            if root_p == root_q or not _touch(lo, hi, min(p, q), max(p, q), periodic_axis, period):
-                continue
-            parent[max(root_p, root_q)] = min(root_p, root_q)
+        for k in range(first[e], last[e] + 1):
+            slab_start[k + 1] += 1
+    for k in range(slabs):
+        slab_start[k + 1] += slab_start[k]
+    fill = slab_start[:-1].copy()
+    size = slab_start[slabs]
+    entry_lo, entry_hi = np.empty(size), np.empty(size)
+    owner = np.empty(size, dtype=np.int64)
+    for e in order:  # by lower bound
+        for k in range(first[e], last[e] + 1):
+            entry_lo[fill[k]], entry_hi[fill[k]], owner[fill[k]] = (
+                base_lo[e],
+                base_hi[e],
+                base_owner[e],
+            )
+            fill[k] += 1
+    return entry_lo, entry_hi, owner, slab_start
+
+
+@numba.njit(cache=True)
+def _sweep_components(lo, hi, axis, slab_axis, slabs, periodic_axis, period):
+    """``labels (N,)`` of the components of the boxes ``lo, hi (N, d)`` (module doc of
+    :func:`connected_components`): union-find over sweeps along ``axis``, one a slab.
+
+    The boxes' intervals on ``axis`` are the sweep entries (when ``axis`` is the periodic one,
+    also each box's copies shifted by ``-+period``: ``3 N`` entries). With a ``slab_axis``
+    (-1: none), that axis is cut into ``slabs`` equal slabs and each entry goes into every slab
+    its box meets there: two touching boxes share a point ``y = max(lo_i, lo_j)`` on that axis,
+    and the slab index ``floor((y - bottom) / height)`` is non-decreasing in ``y`` in floating
+    point too, so both lie in the slab of ``y``. In each slab, entries sorted by lower bound,
+    an entry meets on ``axis`` exactly the entries after it whose lower bound is at most its
+    upper bound; those pairs get the exact test :func:`_touch` (the smaller index first) and,
+    when they touch, their trees are joined (pairs already in one tree are skipped). Time
+    ``O(N log N + C)`` for ``C`` pairs of entries meeting on ``axis`` in a slab; memory
+    ``O(N)`` (:func:`_sweep_axes` bounds the entries by ``3 N``).
+    """
+    n = lo.shape[0]
+    entry_lo, entry_hi, owner, slab_start = _slab_entries(
+        lo, hi, axis, slab_axis, slabs, periodic_axis, period
+    )
+    parent = np.arange(n)
+    for k in range(slab_start.size - 1):
+        end = slab_start[k + 1]
+        for e in range(slab_start[k], end):
+            top, p = entry_hi[e], owner[e]
+            for f in range(e + 1, end):
+                if entry_lo[f] > top:
+                    break
+                q = owner[f]
+                if p == q or not _touch(lo, hi, min(p, q), max(p, q), periodic_axis, period):
+                    continue
+                root_p, root_q = _find(parent, p), _find(parent, q)
+                parent[max(root_p, root_q)] = min(root_p, root_q)
     labels = np.full(n, -1, dtype=np.int64)
     count = 0
     for i in range(n):  # numbered in the order of each component's first box
@@ -289,18 +342,19 @@ def connected_components(
     ``theta = -pi`` and ``theta = pi`` join. Returns ``(count, labels (N,))``, labels
     ``0..count-1`` numbered in the order of each component's first box.
 
-    A compiled union-find over a sweep (:func:`_sweep_components`) along the axis where the
-    boxes overlap least (:func:`_sweep_axis`): ``O(N log N)`` time for pavings (each box
-    meeting, on that axis, a bounded share of the others; ``O(N log N + C)`` for ``C`` pairs
-    meeting there in general) and ``O(N)`` memory, never an ``N x N`` array.
+    A compiled union-find over sweeps (:func:`_sweep_components`) along the axis where the
+    boxes overlap least, one sweep a slab of the next such axis (:func:`_sweep_axes`):
+    ``O(N log N)`` time for pavings (each box meeting, on that axis and in its slabs, a bounded
+    number of others; ``O(N log N + C)`` for ``C`` such pairs in general) and ``O(N)`` memory,
+    never an ``N x N`` array.
     """
     n = boxes.shape[0]
     if n == 0:
         return 0, np.zeros(0, dtype=np.int64)
     lo, hi = _bounds(boxes)
     periodic = -1 if periodic_axis is None else int(periodic_axis)
-    axis = _sweep_axis(boxes, periodic_axis)
-    labels = _sweep_components(lo, hi, axis, periodic, float(period))
+    axis, slab_axis, slabs = _sweep_axes(boxes, periodic_axis)
+    labels = _sweep_components(lo, hi, axis, slab_axis, slabs, periodic, float(period))
     return int(labels.max()) + 1, labels
 
 

@@ -328,14 +328,23 @@ def _random_grid_boxes(rng, n, d, cells):
 
 def _components_every_sweep_axis(boxes, periodic_axis=None, period=2.0 * np.pi):
     """``[(count, labels)]``: :func:`bx.connected_components`, then its sweep along each axis
-    in turn (the periodic one included: the sweep over shifted copies)."""
+    in turn (the periodic one included: the sweep over shifted copies), without slabs and with
+    1, 3 and ``N`` slabs of each other non-periodic axis."""
     found = [bx.connected_components(boxes, periodic_axis, period)]
     lo = np.ascontiguousarray(boxes[..., 0])
     hi = np.ascontiguousarray(boxes[..., 1])
     periodic = -1 if periodic_axis is None else periodic_axis
-    for axis in range(boxes.shape[1]):
-        labels = bx._sweep_components(lo, hi, axis, periodic, period)
-        found.append((int(labels.max()) + 1, labels))
+    d = boxes.shape[1]
+    for axis in range(d):
+        slabbed = [(-1, 1)] + [
+            (slab_axis, slabs)
+            for slab_axis in range(d)
+            if slab_axis not in (axis, periodic_axis)
+            for slabs in (1, 3, boxes.shape[0])
+        ]
+        for slab_axis, slabs in slabbed:
+            labels = bx._sweep_components(lo, hi, axis, slab_axis, slabs, periodic, period)
+            found.append((int(labels.max()) + 1, labels))
     return found
 
 
