@@ -1,14 +1,16 @@
 """Benchmark: how tight the interval sets are, with and without the sonar contractor (issue 13).
 
     python benchmarks/tightness.py [PLAN ...] [--duration S] [--samples N] [--seed S]
-                                   [--tighten-levels L] [--shave-rounds R] [--write]
+                                   [--tighten-levels L ...] [--shave-rounds R] [--no-off]
+                                   [--write]
 
 For each built-in plan (default: all), the scenario is simulated for ``--duration`` seconds
 (default 30) and the interval tracker steps through its scans at ``eps_m = 0.05`` with the
 scenario's other ``[estimation]`` settings, twice, interleaved scan by scan: with the contractor
-(:mod:`intervals.sonar.contractor`, the default) and without it; with ``--tighten-levels L``
-(L > 0) a third time, the contractor on and the kept boxes tightened ``L`` levels below eps
-(:mod:`intervals.tighten`) then shaved ``--shave-rounds`` rounds (default 1). For each tracking epoch the
+(:mod:`intervals.sonar.contractor`, the default) and without it (not with ``--no-off``); with
+``--tighten-levels L ...`` once more for each L > 0, the contractor on and the kept boxes
+tightened ``L`` levels below eps (:mod:`intervals.tighten`) then shaved ``--shave-rounds``
+rounds (default 1). For each tracking epoch the
 outer set's volume (x, y, heading; m² rad) is compared with the volume of the consistent poses
 in it, estimated by sampling: ``--samples`` poses drawn uniformly in the outer boxes (a box
 chosen with probability proportional to its volume), each judged by the simulator's own sonar
@@ -22,7 +24,8 @@ sound), so the fraction of consistent samples ``f`` estimates consistent volume 
 and the tightness ratio is ``1 / f`` (the issue's target: at most 3). Reported per plan and
 contractor setting: the median and 90th percentile of the ratio over the tracking epochs, the
 pooled ratio (all outer volume over all consistent volume), the mean (x, y) area, the median
-epoch time, and the epochs that lost the truth (must be 0). An epoch without a consistent
+and 95th percentile of the epoch's CPU time (``time.process_time``), the median wall time,
+and the epochs that lost the truth (must be 0). An epoch without a consistent
 sample counts as ``--samples`` (a lower bound of its ratio).
 """
 
@@ -74,20 +77,28 @@ def consistent_fraction(boxes, readings, spec, q, rng, samples) -> float:
 
 
 def plan_rows(
-    name: str, duration_s: float, samples: int, seed: int, levels: int = 0, rounds: int = 1
+    name: str,
+    duration_s: float,
+    samples: int,
+    seed: int,
+    levels: tuple[int, ...] = (),
+    rounds: int = 1,
+    off: bool = True,
 ) -> list[list[str]]:
-    """Table rows for one plan: with and without the contractor (and tightened, ``levels >
-    0``)."""
+    """Table rows for one plan: with the contractor, without it (``off``), and tightened
+    ``L`` levels for each ``L > 0`` of ``levels``."""
     spec = load_scenario(name).with_run(duration_s=duration_s)
     spec = spec.with_estimation(eps_m=EPS_M)
     log = simulate_spec(spec)
     est = spec.estimation
     belt = SonarBelt.from_params(spec.sensors.sonar, echoes_never_lost=est.free_space)
-    variants = {"on": {"contractor": True}, "off": {"contractor": False}}
-    if levels:
-        variants[f"on, tighten {levels}, shave {rounds}"] = {
+    variants = {"on": {"contractor": True}}
+    if off:
+        variants["off"] = {"contractor": False}
+    for level in (level for level in levels if level > 0):
+        variants[f"on, tighten {level}, shave {rounds}"] = {
             "contractor": True,
-            "tighten_levels": levels,
+            "tighten_levels": level,
             "shave_rounds": rounds,
         }
     trackers = {
@@ -98,7 +109,8 @@ def plan_rows(
     previous = dict.fromkeys(variants)
     last_t = log.sonar_t_s[scans[0]]
     stats = {
-        key: {"ratio": [], "outer": [], "consistent": [], "area": [], "s": []} for key in variants
+        key: {"ratio": [], "outer": [], "consistent": [], "area": [], "s": [], "cpu": []}
+        for key in variants
     }
     lost = dict.fromkeys(variants, 0)
     rng = np.random.default_rng(seed)
@@ -107,9 +119,9 @@ def plan_rows(
         dt_s = float(log.sonar_t_s[index] - last_t)
         truth = log.sonar_pose[index]
         for key, tracker in trackers.items():  # interleaved: same scan, one after the other
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             result = tracker.step(previous[key], scan, dt_s)
-            elapsed = time.perf_counter() - start
+            elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
             previous[key] = result.paving
             if not result.consistent:
                 continue
@@ -127,12 +139,13 @@ def plan_rows(
             s["consistent"].append(volume * f)
             s["area"].append(result.paving.area_xy())
             s["s"].append(elapsed)
+            s["cpu"].append(cpu)
         last_t = log.sonar_t_s[index]
     rows = []
     for key in variants:
         s = stats[key]
         if not s["ratio"]:
-            rows.append([name, key, "0", "-", "-", "-", "-", "-", str(lost[key])])
+            rows.append([name, key, "0", "-", "-", "-", "-", "-", "-", str(lost[key])])
             continue
         ratio = np.array(s["ratio"])
         pooled = np.sum(s["outer"]) / np.sum(s["consistent"])
@@ -145,6 +158,7 @@ def plan_rows(
                 f"{np.percentile(ratio, 90):.1f}",
                 f"{pooled:.1f}",
                 f"{np.mean(s['area']):.4f}",
+                f"{1e3 * np.median(s['cpu']):.1f} / {1e3 * np.percentile(s['cpu'], 95):.1f}",
                 f"{1e3 * np.median(s['s']):.1f}",
                 str(lost[key]),
             ]
@@ -158,8 +172,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--samples", type=int, default=4000, help="poses sampled per epoch")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sampling")
-    parser.add_argument("--tighten-levels", type=int, default=0, help="also run tightened (0: not)")
+    parser.add_argument(
+        "--tighten-levels", type=int, nargs="*", default=[], help="also run tightened, each L"
+    )
     parser.add_argument("--shave-rounds", type=int, default=1, help="shaving of that run")
+    parser.add_argument("--no-off", action="store_true", help="not without the contractor")
     parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
     args = parser.parse_args(argv)
     plans = args.plans or list(builtin_names())
@@ -171,29 +188,39 @@ def main(argv: list[str] | None = None) -> int:
         "ratio p90",
         "ratio pooled",
         "mean set area (m²)",
-        "epoch median (ms)",
+        "epoch CPU median / p95 (ms)",
+        "epoch wall median (ms)",
         "truth lost",
     ]
     before = machine_line()
     rows = []
     for name in plans:
         new = plan_rows(
-            name, args.duration, args.samples, args.seed, args.tighten_levels, args.shave_rounds
+            name,
+            args.duration,
+            args.samples,
+            args.seed,
+            tuple(args.tighten_levels),
+            args.shave_rounds,
+            not args.no_off,
         )
         rows += new
         print(markdown_table(header, new).split("\n", 2)[2], flush=True)
     command = "python benchmarks/tightness.py" + (" " + " ".join(args.plans) if args.plans else "")
     command += f" --duration {args.duration:g} --samples {args.samples} --seed {args.seed}"
-    if args.tighten_levels:
-        command += f" --tighten-levels {args.tighten_levels} --shave-rounds {args.shave_rounds}"
+    levels = " ".join(str(level) for level in args.tighten_levels if level > 0)
+    if levels:
+        command += f" --tighten-levels {levels} --shave-rounds {args.shave_rounds}"
+    if args.no_off:
+        command += " --no-off"
     body = (
         f"`{command}`: per built-in plan, {args.duration:g} s simulated, eps_m = {EPS_M}, the "
-        "scenario's other settings; the tracker with the sonar contractor (`on`, the default) "
-        "and without (`off`)"
+        "scenario's other settings; the tracker with the sonar contractor (`on`, the default)"
+        + ("" if args.no_off else " and without (`off`)")
         + (
-            f", and with it and the kept boxes tightened {args.tighten_levels} levels below eps "
+            f", and with it and the kept boxes tightened {levels} levels below eps "
             f"then shaved {args.shave_rounds} round(s)"
-            if args.tighten_levels
+            if levels
             else ""
         )
         + ", interleaved scan by scan. Ratio: outer volume over the volume of "

@@ -104,6 +104,7 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     cells = np.array([[x, y] for x in edges for y in edges])
     keep, counts = _disk(cells)
     cells, counts = cells[keep], counts[keep]
+    n = cells.shape[0]
     points = np.random.default_rng(2).uniform(-1, 1, (3000, 2))
     points = points[np.hypot(*points.T) <= 1]
     out, out_counts, tested = tighten(cells, counts, _disk, None, None, 6)
@@ -121,6 +122,11 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     assert some.shape[0] <= room and contains_points(some, points).any(axis=0).all()
     assert volume(out) < volume(some) < volume(cells)
     assert np.array_equal(some_counts, _disk(some)[1])
+    # room for two boxes a box: each bisected once at least (fewer cuts a call), never looser
+    halved, halved_counts, _ = tighten(cells, counts, _disk, None, None, 6, max_boxes=2 * n)
+    assert halved.shape[0] <= 2 * n and contains_points(halved, points).any(axis=0).all()
+    assert volume(halved) <= volume(tighten(cells, counts, _disk, None, None, 1)[0])
+    assert np.array_equal(halved_counts, _disk(halved)[1])
 
     # a contractor that empties a row drops it; one that widens a row is clipped to it
     def widening(b):
