@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from intervals.boxes import (
@@ -76,35 +77,80 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     return verdicts, rejects, reject
 
 
+@numba.njit(cache=True)
+def _meets_any_into(boxes, regions, meets):
+    """Fill ``meets (N,)`` (:func:`meets_any`), each box left at the first region it meets."""
+    for i in range(boxes.shape[0]):
+        for r in range(regions.shape[0]):
+            hit = True
+            for a in range(boxes.shape[1]):
+                if not (boxes[i, a, 0] <= regions[r, a, 1] and regions[r, a, 0] <= boxes[i, a, 1]):
+                    hit = False
+                    break
+            if hit:
+                meets[i] = True
+                break
+
+
 def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: the box meets (closed intervals) at least one of ``regions (M, d, 2)``;
-    ``O(N M)``, for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
-    lo_ok = boxes[:, None, :, 0] <= regions[None, :, :, 1]
-    hi_ok = regions[None, :, :, 0] <= boxes[:, None, :, 1]
-    return np.any(np.all(lo_ok & hi_ok, axis=2), axis=1)
+    ``O(N M)`` (compiled), for a few regions (:data:`MAX_WITHIN_REGIONS`)."""
+    meets = np.zeros(boxes.shape[0], dtype=bool)
+    _meets_any_into(_contiguous(boxes), _contiguous(regions), meets)
+    return meets
+
+
+@numba.njit(cache=True)
+def _larger(a, b):
+    """``np.maximum`` of two floats (``b`` on ties, as numpy: the same signed zeros)."""
+    return a if a > b else b
+
+
+@numba.njit(cache=True)
+def _smaller(a, b):
+    """``np.minimum`` of two floats (``b`` on ties, as numpy)."""
+    return a if a < b else b
+
+
+@numba.njit(cache=True)
+def _clip_into(boxes, regions, clipped, held):
+    """Fill ``clipped (N, d, 2)`` and ``held (N,)`` (False on entry) as
+    :func:`clip_to_regions` says, one region after the other."""
+    d = boxes.shape[1]
+    for i in range(boxes.shape[0]):
+        clipped[i, :, 0] = np.inf
+        clipped[i, :, 1] = -np.inf
+        for r in range(regions.shape[0]):
+            hit, inside = True, True
+            for a in range(d):
+                lo, hi = boxes[i, a, 0], boxes[i, a, 1]
+                if not _larger(lo, regions[r, a, 0]) <= _smaller(hi, regions[r, a, 1]):
+                    hit = False
+                    break
+                inside = inside and regions[r, a, 0] <= lo and hi <= regions[r, a, 1]
+            if hit:
+                for a in range(d):
+                    lo = _larger(boxes[i, a, 0], regions[r, a, 0])
+                    hi = _smaller(boxes[i, a, 1], regions[r, a, 1])
+                    clipped[i, a, 0] = _smaller(clipped[i, a, 0], lo)
+                    clipped[i, a, 1] = _larger(clipped[i, a, 1], hi)
+                held[i] = held[i] or inside
 
 
 def clip_to_regions(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(clipped (N, d, 2), held (N,) bool)``: each box cut down to the hull of its
     intersections with ``regions (M, d, 2)`` (closed intervals; a box meeting none becomes an
     empty row, lower bounds above upper), and whether it lies within one region. Every point
-    of a box that lies in some region stays in its clipped box. ``O(N M)`` in blocks of
-    about 260,000 box-region pairs (some 6 MB an array), for a few regions
-    (:data:`MAX_WITHIN_REGIONS`)."""
-    n, m = boxes.shape[0], regions.shape[0]
-    clipped, held = np.empty_like(boxes), np.zeros(n, dtype=bool)
-    step = max(1, (1 << 18) // max(m, 1))
-    for start in range(0, n, step):
-        b = boxes[start : start + step, None]  # (n', 1, d, 2)
-        lo = np.maximum(b[..., 0], regions[None, :, :, 0])  # (n', M, d)
-        hi = np.minimum(b[..., 1], regions[None, :, :, 1])
-        meets = np.all(lo <= hi, axis=2)[..., None]  # (n', M, 1)
-        part = clipped[start : start + step]
-        part[..., 0] = np.where(meets, lo, np.inf).min(axis=1, initial=np.inf)
-        part[..., 1] = np.where(meets, hi, -np.inf).max(axis=1, initial=-np.inf)
-        inside = (regions[None, :, :, 0] <= b[..., 0]) & (b[..., 1] <= regions[None, :, :, 1])
-        held[start : start + step] = np.any(np.all(inside, axis=2), axis=1)
+    of a box that lies in some region stays in its clipped box. ``O(N M)`` (compiled), for a
+    few regions (:data:`MAX_WITHIN_REGIONS`)."""
+    clipped = np.empty(boxes.shape, dtype=np.float64)
+    held = np.zeros(boxes.shape[0], dtype=bool)
+    _clip_into(_contiguous(boxes), _contiguous(regions), clipped, held)
     return clipped, held
+
+
+def _contiguous(boxes: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(boxes, dtype=np.float64)
 
 
 MAX_WITHIN_REGIONS = 256
