@@ -328,3 +328,18 @@ def test_clip_to_regions_keeps_every_point_in_a_region_and_equals_the_numpy_broa
                 (clipped[:, None, :, 0] <= points) & (points <= clipped[:, None, :, 1]), axis=2
             )
             assert np.all(in_clip | ~in_region)
+
+
+def test_the_relaxed_bound_is_the_sorted_rank():
+    """``_largest`` (the contractor's ``(q + 1)``-th largest bound) against ``np.sort`` on
+    random values with ties, infinities and signed zeros, for every rank."""
+    from intervals.sonar.contractor import _largest
+
+    rng = np.random.default_rng(4)
+    pool = np.array([-np.inf, -1.0, -0.0, 0.0, 0.5, 2.0, np.inf])
+    for trial in range(2000):
+        k = int(rng.integers(1, 20))
+        values = rng.choice(pool, k) if trial % 2 else rng.normal(size=k)
+        q = int(rng.integers(0, k))
+        got = _largest(values.copy(), q, np.empty(q + 1))
+        assert got == np.sort(values)[k - 1 - q]
