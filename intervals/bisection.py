@@ -1,9 +1,11 @@
 """SIVIA's bisection rounds compiled (numba): one call per level instead of numpy passes.
 
-:func:`split_rounds` bisects every box at the middle of its widest scaled dimension (as
-:func:`intervals.boxes.bisect`: the same float operations, ``lo + (hi - lo) / 2``, the first
-widest axis on ties), sets aside the children no wider than ``eps`` (scaled, as
-:func:`intervals.boxes.max_width`) and bisects the others again, ``times`` rounds in all. The
+:func:`split_rounds` bisects every box at the middle of its widest scaled dimension that is
+not idle (as :func:`intervals.boxes.bisect` when none is: the same float operations,
+``lo + (hi - lo) / 2``, the first widest axis on ties), sets aside the children no wider than
+``eps`` along their axes not idle (scaled, as :func:`intervals.boxes.max_width` when none is;
+:func:`intervals.sivia.cut_width`) and bisects the others again, ``times`` rounds in all. A
+child inherits the idle axes of its box (:func:`intervals.sivia.sivia`'s ``idle``). The
 children come out in the order of the numpy rounds it replaces (each round: every left child,
 then every right child; the narrow ones of round 1, of round 2, ..., then those still wide),
 so SIVIA stores and tests the same boxes in the same order. A tracking epoch spends a
@@ -18,21 +20,23 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def _widest(box, scale):
-    """``(axis, width)``: the first axis of largest scaled width of ``box (d, 2)``."""
-    axis, best = 0, (box[0, 1] - box[0, 0]) * scale[0]
-    for a in range(1, box.shape[0]):
+def _widest(box, scale, idle):
+    """The first axis of largest scaled width of ``box (d, 2)`` among those not ``idle (d,)``
+    (0 if every axis is idle)."""
+    axis, best = 0, -1.0
+    for a in range(box.shape[0]):
         w = (box[a, 1] - box[a, 0]) * scale[a]
-        if w > best:
+        if not idle[a] and w > best:
             axis, best = a, w
-    return axis, best
+    return axis
 
 
 @numba.njit(cache=True)
-def split_rounds(boxes, eps, scale, times):
+def split_rounds(boxes, eps, scale, times, idle):
     """``(children (M, d, 2), parents (M,) int64)``: ``boxes (N, d, 2)`` (each wider than
-    ``eps``) bisected ``times`` rounds (module doc); ``parents``: the row of ``boxes`` each child
-    lies in. ``scale (d,)`` positive."""
+    ``eps`` along an axis not idle) bisected ``times`` rounds (module doc), never across the
+    axes ``idle (N, d) bool`` of their box; ``parents``: the row of ``boxes`` each child lies
+    in. ``scale (d,)`` positive."""
     n, d = boxes.shape[0], boxes.shape[1]
     todo, owners = boxes.copy(), np.arange(n)
     out = np.empty((n << times, d, 2))
@@ -45,7 +49,8 @@ def split_rounds(boxes, eps, scale, times):
         wide = 0
         for side in range(2):  # the left children, then the right ones
             for i in range(m):
-                axis, _ = _widest(todo[i], scale)
+                box_idle = idle[owners[i]]
+                axis = _widest(todo[i], scale, box_idle)
                 lo, hi = todo[i, axis, 0], todo[i, axis, 1]
                 cut = lo + (hi - lo) / 2.0
                 target = out[count]  # written here, kept if narrow
@@ -57,7 +62,7 @@ def split_rounds(boxes, eps, scale, times):
                             c_hi = cut
                         else:
                             c_lo = cut
-                    if (c_hi - c_lo) * scale[a] > eps:
+                    if not box_idle[a] and (c_hi - c_lo) * scale[a] > eps:
                         narrow = False
                     target[a, 0], target[a, 1] = c_lo, c_hi
                 if narrow:

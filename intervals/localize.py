@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from intervals.boxes import (
@@ -250,7 +251,9 @@ def _pave(
         if inner:
             held.append(b[verdicts == INSIDE])
             held_counts.append(rejects[verdicts == INSIDE])
-        return verdicts, rejects  # under a budget, the boxes fewest sensors reject go first
+        # under a budget, the boxes fewest sensors reject go first; SIVIA never cuts a box
+        # across its idle axes (found once a box, here)
+        return verdicts, rejects, axes
 
     def inner_counts(boxes):  # the count of each INSIDE box (recomputed if not as recorded)
         done = np.concatenate([*held, boxes[:0]])
@@ -264,9 +267,12 @@ def _pave(
         meets = meets_any(b, within)
         verdicts = np.full(b.shape[0], OUTSIDE, dtype=np.int8)
         rejects = np.full(b.shape[0], local.belt.count + 1, dtype=np.int64)
+        axes = None if still is None else np.zeros(b.shape[:2], dtype=bool)
         if meets.any():
-            verdicts[meets], rejects[meets] = sonar_test(b[meets])
-        return verdicts, rejects
+            verdicts[meets], rejects[meets], met_axes = sonar_test(b[meets])
+            if axes is not None:
+                axes[meets] = met_axes
+        return verdicts, rejects, axes
 
     def counted(b):  # the test of the tightening: (kept, counts) as SIVIA's stored boxes
         verdicts, rejects, reject = _test_and_counts(b, local, q, False)
@@ -303,7 +309,6 @@ def _pave(
         min_level_boxes=MIN_LEVEL_BOXES,
         max_tested=None if max_boxes is None else int(tests_per_box * max_boxes),
         contract=contracted if contract or within is not None else None,
-        idle=still,
     )
     kept_cap = max_boxes if max_kept is None else max_kept
     over = max_boxes is not None and paving.outer.shape[0] > kept_cap

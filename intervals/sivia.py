@@ -15,7 +15,7 @@ from enum import IntEnum
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, bisect, centres, max_width, widths
+from intervals.boxes import Subpaving, as_boxes, max_width, widths
 from intervals.errors import IntervalError
 
 
@@ -27,30 +27,36 @@ class Verdict(IntEnum):
     UNDECIDED = 2
 
 
-OUTSIDE, INSIDE, UNDECIDED = Verdict.OUTSIDE, Verdict.INSIDE, Verdict.UNDECIDED
+OUTSIDE, INSIDE, UNDECIDED = int(Verdict.OUTSIDE), int(Verdict.INSIDE), int(Verdict.UNDECIDED)
+"""The :class:`Verdict` values as plain ints, for the array operations: numpy compares an
+array with an ``IntEnum`` member several times slower (about 25 us against 3 us for 300
+verdicts), and a tracking epoch's SIVIA levels make a few dozen such operations each."""
 
-BoxTest = Callable[[np.ndarray], np.ndarray | tuple[np.ndarray, np.ndarray]]
+BoxTest = Callable[
+    [np.ndarray],
+    np.ndarray | tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray],
+]
 """``test(boxes (N, d, 2)) -> (N,) int8`` of :class:`Verdict` values, or ``(verdicts, scores
 (N,))``: a score per box, lower for the boxes to refine first under a budget (e.g. the number
-of sensors rejecting the box; see :func:`sivia`'s ``max_tested``)."""
+of sensors rejecting the box; see :func:`sivia`'s ``max_tested``), or ``(verdicts, scores,
+idle (N, d) bool)``: also the *idle axes* of each box, along which cutting it cannot separate
+points of ``X`` from points outside it (e.g. :func:`intervals.sonar.idle.idle_axes`), found
+by the test as it decides the box (see :func:`sivia`)."""
 
 Contractor = Callable[[np.ndarray], np.ndarray]
 """``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row a box inside the input row holding
 every point of it that satisfies the constraints; a row with no such point is marked empty
 (NaN, or a lower bound above the upper)."""
 
-IdleAxes = Callable[[np.ndarray], np.ndarray]
-"""``idle(boxes (N, d, 2)) -> (N, d) bool``: the axes along which cutting a box cannot separate
-points of ``X`` from points outside it (e.g. :func:`intervals.sonar.idle.idle_axes`)."""
-
 DEFAULT_MAX_BOXES = 200_000
 """Most boxes SIVIA hands to the test at once (a larger frontier is tested in chunks)."""
 
 
-def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The test's ``(verdicts (N,), scores (N,))`` (scores 0 when the test gives none)."""
+def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The test's ``(verdicts (N,), scores (N,), idle (N, d) or None)`` (scores 0 when the
+    test gives none)."""
     out = test(boxes)
-    v, scores = out if isinstance(out, tuple) else (out, None)
+    v, scores, idle = (*out, None, None)[:3] if isinstance(out, tuple) else (out, None, None)
     v = np.asarray(v)
     n = boxes.shape[0]
     if v.shape != (n,):
@@ -62,7 +68,11 @@ def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         raise IntervalError(
             f"SIVIA test scores must be {n} finite numbers, got shape {scores.shape}"
         )
-    return v, scores
+    if idle is not None:
+        idle = np.asarray(idle)
+        if idle.shape != boxes.shape[:2] or idle.dtype != bool:
+            raise IntervalError(f"SIVIA test idle axes must be {boxes.shape[:2]} bool")
+    return v, scores, idle
 
 
 def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
@@ -81,19 +91,6 @@ def cut_width(boxes: np.ndarray, scale=None, idle: np.ndarray | None = None) -> 
     return np.max(np.where(idle, 0.0, w), axis=-1) if idle is not None else np.max(w, axis=-1)
 
 
-def _bisect_active(boxes: np.ndarray, scale, idle: np.ndarray | None):
-    """:func:`intervals.boxes.bisect` along the widest scaled axis that is not idle."""
-    if idle is None:
-        return bisect(boxes, scale)
-    rows = np.arange(boxes.shape[0])
-    axis = np.argmax(np.where(idle, -1.0, widths(boxes, scale)), axis=-1)
-    cut = centres(boxes)[rows, axis]
-    left, right = boxes.copy(), boxes.copy()
-    left[rows, axis, 1] = cut
-    right[rows, axis, 0] = cut
-    return left, right
-
-
 def _split(
     boxes: np.ndarray,
     eps: float,
@@ -103,25 +100,14 @@ def _split(
     idle: np.ndarray | None = None,
 ) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
-    rounds in all (``grouped``: the children in the order of their parents; ``idle (N, d)``:
-    the axes of each box never cut, inherited by its children). Without idle axes the rounds
-    run in one compiled call (:func:`intervals.bisection.split_rounds`)."""
-    if idle is None or not idle.any():
-        unit = np.ones(boxes.shape[1]) if scale is None else scale
-        out, parents = split_rounds(np.ascontiguousarray(boxes), float(eps), unit, int(times))
-    else:
-        done, todo = [], boxes
-        owned, todo_parents = [], np.arange(boxes.shape[0])
-        for _ in range(times):
-            left, right = _bisect_active(todo, scale, idle[todo_parents])
-            children = np.concatenate([left, right], axis=0)
-            owners = np.concatenate([todo_parents, todo_parents])
-            wide = cut_width(children, scale, idle[owners]) > eps
-            done.append(children[~wide])
-            owned.append(owners[~wide])
-            todo, todo_parents = children[wide], owners[wide]
-        out = np.concatenate([*done, todo], axis=0)
-        parents = np.concatenate([*owned, todo_parents])
+    rounds in all, in one compiled call (:func:`intervals.bisection.split_rounds`; ``grouped``:
+    the children in the order of their parents; ``idle (N, d)``: the axes of each box never
+    cut, inherited by its children, None: none)."""
+    unit = np.ones(boxes.shape[1]) if scale is None else scale
+    still = np.zeros(boxes.shape[:2], dtype=bool) if idle is None else np.asarray(idle, bool)
+    out, parents = split_rounds(
+        np.ascontiguousarray(boxes), float(eps), unit, int(times), np.ascontiguousarray(still)
+    )
     if grouped:
         out = out[np.argsort(parents, kind="stable")]
     return out
@@ -144,7 +130,6 @@ def sivia(
     min_level_boxes: int = 1,
     max_tested: int | None = None,
     contract: Contractor | None = None,
-    idle: IdleAxes | None = None,
 ) -> Subpaving:
     """Pave ``initial`` (one box ``(d, 2)`` or a subpaving ``(N, d, 2)``) with ``test``.
 
@@ -176,9 +161,10 @@ def sivia(
     the boxes it empties are dropped as OUTSIDE, the others tested (and bisected) as
     contracted. Sound when the contractor is: it keeps every point that satisfies the
     constraints, and the test sees only such boxes.
-    ``idle``: an :data:`IdleAxes` (None: none). The undecided boxes are never cut across their
-    idle axes, and a box is small when its other axes are no wider than ``eps`` (a box idle
-    along every axis is kept whole): the cuts are a choice, any choice keeps the set sound.
+    Idle axes (the test's third output, :data:`BoxTest`): the undecided boxes are never cut
+    across their idle axes (nor their children, which inherit them), and a box is small when
+    its other axes are no wider than ``eps`` (a box idle along every axis is kept whole): the
+    cuts are a choice, any choice keeps the set sound.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -228,10 +214,10 @@ def sivia(
             coarse = True
             break
         tested += boxes.shape[0]
-        v, scores = _verdicts(test, boxes)
+        v, scores, idle = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
         undecided = boxes[v == UNDECIDED]
-        still = None if idle is None or not undecided.shape[0] else np.asarray(idle(undecided))
+        still = None if idle is None else idle[v == UNDECIDED]
         small = cut_width(undecided, scale, still) <= eps
         boundary.append(undecided[small])
         wide = undecided[~small]

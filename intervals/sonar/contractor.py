@@ -258,23 +258,45 @@ def _segment_backward(ax, ay, ex, ey, box, rows, done, guard_m):
 
 
 @numba.njit(cache=True)
-def _relaxed_bounds(rows, kind, box, q, lows, highs):
+def _largest(values, q, top):
+    """The ``(q + 1)``-th largest of ``values (k,)`` (``q < k``), ``np.sort(values)[k - 1 - q]``,
+    in one pass keeping the ``q + 1`` largest in ``top (q + 1,)`` (descending)."""
+    count = 0
+    for v in values:
+        if count <= q:
+            pos = count
+            count += 1
+        elif v > top[q]:
+            pos = q
+        else:
+            continue
+        while pos > 0 and top[pos - 1] < v:
+            top[pos] = top[pos - 1]
+            pos -= 1
+        top[pos] = v
+    return top[q]
+
+
+@numba.njit(cache=True)
+def _relaxed_bounds(rows, kind, box, q, lows, highs, top):
     """The q-relaxed ``(x_lo, x_hi, y_lo, y_hi)``: per axis the ``(q + 1)``-th largest lower
     bound and the ``(q + 1)``-th smallest upper bound of the sensors' allowed boxes (a sensor
-    without an echo allows the whole box)."""
+    without an echo allows the whole box); ``lows, highs (k,)``, ``top (q + 1,)``: scratch (the
+    upper bounds negated, so that the smallest is the largest of their negatives, exactly)."""
     k = rows.shape[0]
     out = np.empty(4)
     for axis in range(2):
+        if q >= k:
+            out[2 * axis], out[2 * axis + 1] = box[axis, 0], box[axis, 1]
+            continue
         for i in range(k):
             if kind[i] == ECHO:
                 lows[i] = rows[i, A_XL + 2 * axis]
-                highs[i] = rows[i, A_XH + 2 * axis]
+                highs[i] = -rows[i, A_XH + 2 * axis]
             else:
-                lows[i], highs[i] = box[axis, 0], box[axis, 1]
-        lows.sort()
-        highs.sort()
-        out[2 * axis] = max(lows[k - 1 - q], box[axis, 0]) if q < k else box[axis, 0]
-        out[2 * axis + 1] = min(highs[q], box[axis, 1]) if q < k else box[axis, 1]
+                lows[i], highs[i] = box[axis, 0], -box[axis, 1]
+        out[2 * axis] = max(_largest(lows, q, top), box[axis, 0])
+        out[2 * axis + 1] = min(-_largest(highs, q, top), box[axis, 1])
     return out
 
 
@@ -313,7 +335,7 @@ def contract_into(
     """
     k = belt.shape[0]
     rows = np.empty((k, ROW_COLUMNS))
-    lows, highs = np.empty(k), np.empty(k)
+    lows, highs, top = np.empty(k), np.empty(k), np.empty(q + 1)
     done = np.empty(k, dtype=np.bool_)  # the sensor's A_i can change no more
     guard_m = params[2]
     echoes = 0
@@ -368,7 +390,7 @@ def contract_into(
                         remaining -= _segment_backward(
                             ax, ay, bx - ax, by - ay, work, rows, done, guard_m
                         )
-            b = _relaxed_bounds(rows, kind, work, q, lows, highs)
+            b = _relaxed_bounds(rows, kind, work, q, lows, highs, top)
             if not (b[0] <= b[1] and b[2] <= b[3]):
                 empty = True
                 break

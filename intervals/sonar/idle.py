@@ -31,6 +31,7 @@ heuristic: any choice keeps the set sound (SIVIA only drops boxes the test rejec
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from intervals.sonar.geometry import GUARD_M
@@ -39,9 +40,6 @@ from intervals.sonar.scan import SonarScan
 MAX_SEGMENTS = 64
 """With more segments (and boundary edges) in a scan, no axis is reported idle (the check
 costs ``O(N m)`` a call; a scan restricted to a tracking set holds few)."""
-
-BLOCK_PAIRS = 1 << 20
-"""Largest number of (box, segment) pairs compared at once."""
 
 
 def scan_walls(scan: SonarScan) -> np.ndarray:
@@ -52,6 +50,28 @@ def scan_walls(scan: SonarScan) -> np.ndarray:
         b = np.asarray(scan.boundary, dtype=np.float64)
         walls.append(np.stack([b, np.roll(b, -1, axis=0)], axis=1))
     return np.concatenate(walls)
+
+
+@numba.njit(cache=True)
+def _idle_into(boxes, lo, hi, reach, idle):
+    """Fill ``idle (N, 3)`` (False on entry) for the pose boxes ``(N, 3, 2)`` and the walls'
+    bounding boxes ``lo, hi (m, 2)``, ``reach`` m (module doc). One pass over the walls a box,
+    left at the first wall in reach that keeps neither ``x`` nor ``y`` idle (an oblique wall,
+    or one not spanning ``W``), which decides most boxes near walls after a few walls."""
+    for i in range(boxes.shape[0]):
+        w_lo_x, w_hi_x = boxes[i, 0, 0] - reach, boxes[i, 0, 1] + reach
+        w_lo_y, w_hi_y = boxes[i, 1, 0] - reach, boxes[i, 1, 1] + reach
+        along_x, along_y, seen = True, True, False
+        for j in range(lo.shape[0]):
+            if lo[j, 0] > w_hi_x or w_lo_x > hi[j, 0] or lo[j, 1] > w_hi_y or w_lo_y > hi[j, 1]:
+                continue  # the wall does not meet W
+            seen = True
+            # x stays idle if the wall is horizontal and spans W's x range; y likewise
+            along_x = along_x and lo[j, 1] == hi[j, 1] and lo[j, 0] <= w_lo_x and w_hi_x <= hi[j, 0]
+            along_y = along_y and lo[j, 0] == hi[j, 0] and lo[j, 1] <= w_lo_y and w_hi_y <= hi[j, 1]
+            if not (along_x or along_y):
+                break
+        idle[i, 0], idle[i, 1], idle[i, 2] = along_x, along_y, not seen
 
 
 def idle_axes(boxes: np.ndarray, scan: SonarScan, walls: np.ndarray | None = None) -> np.ndarray:
@@ -66,19 +86,9 @@ def idle_axes(boxes: np.ndarray, scan: SonarScan, walls: np.ndarray | None = Non
         return idle
     assert scan.scene is not None
     reach = scan.reach_m + scan.scene.mount_radius_m + GUARD_M
-    lo = walls.min(axis=1)  # (m, 2) bounding boxes of the walls
-    hi = walls.max(axis=1)
-    flat = lo == hi  # (m, 2): [:, 1] horizontal (y constant), [:, 0] vertical
-    step = max(1, BLOCK_PAIRS // max(walls.shape[0], 1))
-    for start in range(0, n, step):
-        b = boxes[start : start + step, :2]  # (n', 2, 2)
-        w_lo, w_hi = b[:, None, :, 0] - reach, b[:, None, :, 1] + reach  # (n', 1, 2)
-        meets = np.all((lo[None] <= w_hi) & (w_lo <= hi[None]), axis=2)  # (n', m)
-        spans = (lo[None] <= w_lo) & (w_hi <= hi[None])  # (n', m, 2)
-        for axis, other in ((0, 1), (1, 0)):
-            along = flat[None, :, other] & spans[..., axis]  # the wall runs along ``axis``
-            idle[start : start + step, axis] = np.all(~meets | along, axis=1)
-        idle[start : start + step, 2] = ~meets.any(axis=1)
+    lo = np.ascontiguousarray(walls.min(axis=1))  # (m, 2) bounding boxes of the walls
+    hi = np.ascontiguousarray(walls.max(axis=1))
+    _idle_into(np.ascontiguousarray(boxes, dtype=np.float64), lo, hi, float(reach), idle)
     return idle
 
 

@@ -17,7 +17,7 @@ import shapely
 from intervals import localize as localize_module
 from intervals.boxes import volume
 from intervals.errors import IntervalError
-from intervals.localize import box_test, gomne, localize, meets_any
+from intervals.localize import box_test, clip_to_regions, gomne, localize, meets_any
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 from intervals.sonar.contractor import contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -280,3 +280,66 @@ def test_boxes_outside_every_region_of_within_are_never_contracted(monkeypatch):
         seen.clear()
         gomne(scan, prior, 0.05, q_max=1)
         assert contracted.shape[0] < np.concatenate(seen).shape[0]
+
+
+def test_clip_to_regions_keeps_every_point_in_a_region_and_equals_the_numpy_broadcast():
+    """The compiled clip against its numpy broadcast (the hull over the regions a box meets of
+    the intersections, closed intervals; held: within one region) bit for bit, on random boxes
+    and regions with shared bounds and signed zeros; every sampled point of a box lying in
+    some region is in its clipped box, and ``meets_any`` is "the clipped box is not empty"."""
+    rng = np.random.default_rng(21)
+    for trial in range(300):
+        n, m = int(rng.integers(0, 60)), int(rng.integers(0, 8))
+        grid = np.array([-1.0, -0.0, 0.0, 0.5, 1.0])
+        lo = rng.choice(grid, (n, 3)) if trial % 2 else rng.uniform(-1, 1, (n, 3))
+        boxes = np.stack([lo, lo + rng.choice([0.0, 0.5, 1.0], (n, 3))], -1)
+        r_lo = rng.choice(grid, (m, 3))
+        regions = np.stack([r_lo, r_lo + rng.choice([0.0, 0.5, 1.5], (m, 3))], -1)
+        clipped, held = clip_to_regions(boxes, regions)
+        b = boxes[:, None]
+        lo_b = np.maximum(b[..., 0], regions[None, :, :, 0])
+        hi_b = np.minimum(b[..., 1], regions[None, :, :, 1])
+        met = np.all(lo_b <= hi_b, axis=2)[..., None]
+        expected = np.stack(
+            [
+                np.where(met, lo_b, np.inf).min(axis=1, initial=np.inf),
+                np.where(met, hi_b, -np.inf).max(axis=1, initial=-np.inf),
+            ],
+            -1,
+        )
+        within = (regions[None, :, :, 0] <= b[..., 0]) & (b[..., 1] <= regions[None, :, :, 1])
+        assert clipped.tobytes() == expected.tobytes()
+        np.testing.assert_array_equal(held, np.any(np.all(within, axis=2), axis=1))
+        np.testing.assert_array_equal(
+            meets_any(boxes, regions), np.all(clipped[..., 0] <= clipped[..., 1], axis=1)
+        )
+        if n and m:
+            t = rng.random((n, 50, 3))
+            points = boxes[:, None, :, 0] + t * (boxes[:, None, :, 1] - boxes[:, None, :, 0])
+            in_region = np.any(
+                np.all(
+                    (regions[None, None, :, :, 0] <= points[:, :, None])
+                    & (points[:, :, None] <= regions[None, None, :, :, 1]),
+                    axis=3,
+                ),
+                axis=2,
+            )
+            in_clip = np.all(
+                (clipped[:, None, :, 0] <= points) & (points <= clipped[:, None, :, 1]), axis=2
+            )
+            assert np.all(in_clip | ~in_region)
+
+
+def test_the_relaxed_bound_is_the_sorted_rank():
+    """``_largest`` (the contractor's ``(q + 1)``-th largest bound) against ``np.sort`` on
+    random values with ties, infinities and signed zeros, for every rank."""
+    from intervals.sonar.contractor import _largest
+
+    rng = np.random.default_rng(4)
+    pool = np.array([-np.inf, -1.0, -0.0, 0.0, 0.5, 2.0, np.inf])
+    for trial in range(2000):
+        k = int(rng.integers(1, 20))
+        values = rng.choice(pool, k) if trial % 2 else rng.normal(size=k)
+        q = int(rng.integers(0, k))
+        got = _largest(values.copy(), q, np.empty(q + 1))
+        assert got == np.sort(values)[k - 1 - q]

@@ -11,7 +11,7 @@ from intervals import interval as ia
 from intervals.bisection import split_rounds
 from intervals.errors import IntervalError
 from intervals.imagesp import imagesp, unique_rows
-from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
+from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, cut_width, sivia
 
 
 def range_only_test(landmarks: np.ndarray, ranges: np.ndarray):
@@ -104,6 +104,31 @@ def test_sivia_accepts_initial_subpaving_and_checks_preconditions():
         sivia(lambda b: np.full(b.shape[0], 7, np.int8), halves, eps=0.1)
 
 
+def test_sivia_never_cuts_across_the_idle_axes_its_test_reports():
+    """A test reporting ``y`` idle (here ``y`` does not enter the constraints, the set is a
+    band along ``y``): no box is cut across ``y``, the boundary boxes are as tall as the
+    initial box and narrow along ``x``, the set holds every feasible point and only idle
+    axes of the right shape are accepted."""
+
+    def band(boxes):  # 1 <= x <= 1.5, any y
+        v = np.where((boxes[:, 0, 1] < 1.0) | (boxes[:, 0, 0] > 1.5), OUTSIDE, UNDECIDED)
+        v[(boxes[:, 0, 0] >= 1.0) & (boxes[:, 0, 1] <= 1.5)] = INSIDE
+        idle = np.zeros(boxes.shape[:2], dtype=bool)
+        idle[:, 1] = True
+        return v.astype(np.int8), np.zeros(boxes.shape[0]), idle
+
+    box = np.array([[-3.0, 3.0], [-2.0, 2.0]])
+    paving = sivia(band, box, eps=0.05)
+    outer = paving.outer
+    np.testing.assert_array_equal(outer[:, 1], np.broadcast_to(box[1], (outer.shape[0], 2)))
+    assert np.all(bx.widths(paving.boundary)[:, 0] <= 0.05)
+    g = np.linspace(-3, 3, 601)
+    points = np.stack(np.meshgrid(g, np.linspace(-2, 2, 41), indexing="ij"), -1).reshape(-1, 2)
+    assert paving.contains(points[(points[:, 0] >= 1.0) & (points[:, 0] <= 1.5)]).all()
+    with pytest.raises(IntervalError, match="idle axes"):
+        sivia(lambda b: band(b)[:2] + (np.zeros(b.shape[0], bool),), box, eps=0.05)
+
+
 def test_sivia_in_chunks_and_under_a_test_budget():
     """A frontier larger than ``max_boxes`` is tested in chunks (no call sees more, same
     set); with ``max_tested`` the paving stops, is marked coarse, and still covers the set
@@ -159,15 +184,21 @@ def test_bisect_scaled_axis_and_union():
     assert bx.volume(np.concatenate([left, right])) == pytest.approx(bx.volume(box))
 
 
-def _numpy_split_rounds(boxes, eps, scale, times):
+def _numpy_split_rounds(boxes, eps, scale, times, idle):
     """The bisection rounds as numpy passes (what SIVIA ran before the compiled call): each
-    round every left child, then every right child; the narrow ones set aside in round
+    round every left child, then every right child, cut along the first widest scaled axis not
+    ``idle (N, d)`` of its box; the narrow ones (along their axes not idle) set aside in round
     order, the still wide ones last; with the row of the parent of each."""
     done, parents, todo, owners = [], [], boxes, np.arange(boxes.shape[0])
     for _ in range(times):
-        left, right = bx.bisect(todo, scale)
+        rows = np.arange(todo.shape[0])
+        axis = np.argmax(np.where(idle[owners], -1.0, bx.widths(todo, scale)), axis=-1)
+        cut = bx.centres(todo)[rows, axis]
+        left, right = todo.copy(), todo.copy()
+        left[rows, axis, 1] = cut
+        right[rows, axis, 0] = cut
         children, owners = np.concatenate([left, right]), np.concatenate([owners, owners])
-        wide = bx.max_width(children, scale) > eps
+        wide = cut_width(children, scale, idle[owners]) > eps
         done.append(children[~wide])
         parents.append(owners[~wide])
         todo, owners = children[wide], owners[wide]
@@ -176,31 +207,36 @@ def _numpy_split_rounds(boxes, eps, scale, times):
 
 def test_compiled_bisection_rounds_give_the_numpy_rounds_children_in_order():
     """``split_rounds`` against the numpy rounds on random boxes of 1 to 4 dimensions whose
-    widths tie often (the first widest axis is cut): the same children bit for bit, in the same
-    order, with the same parents; each child lies in its parent and the children of a parent
-    fill it (volumes add up)."""
+    widths tie often (the first widest axis is cut), without idle axes and with random ones: the
+    same children bit for bit, in the same order, with the same parents; no child is cut across
+    an idle axis of its parent; each child lies in its parent and the children of a parent fill
+    it (volumes add up)."""
     rng = np.random.default_rng(8)
     checked = 0
-    for _ in range(200):
+    for trial in range(400):
         n, d = int(rng.integers(1, 120)), int(rng.integers(1, 5))
         lo = rng.uniform(-5, 5, (n, d))
         width = rng.choice([0.05, 0.1, 0.2, 0.7, 1.3], (n, d)) * rng.choice([1.0, 0.5], (n, d))
         boxes = np.stack([lo, lo + width], axis=-1)
         scale = rng.choice([0.5, 1.0, 2.0], d)
         eps = float(rng.choice([0.049, 0.1, 0.3]))
-        boxes = boxes[bx.max_width(boxes, scale) > eps]
+        idle = (rng.random((n, d)) < 0.4) if trial % 2 else np.zeros((n, d), dtype=bool)
+        wide = cut_width(boxes, scale, idle) > eps
+        boxes, idle = boxes[wide], idle[wide]
         if boxes.shape[0] == 0:
             continue
         for times in (1, 3, 6):
-            children, parents = split_rounds(boxes, eps, scale, times)
-            expected, expected_parents = _numpy_split_rounds(boxes, eps, scale, times)
+            children, parents = split_rounds(boxes, eps, scale, times, idle)
+            expected, expected_parents = _numpy_split_rounds(boxes, eps, scale, times, idle)
             np.testing.assert_array_equal(children, expected)
             np.testing.assert_array_equal(parents, expected_parents)
             assert bx.contains_boxes(boxes[parents], children).all()
+            kept = np.where(idle[parents][..., None], boxes[parents], children)
+            np.testing.assert_array_equal(kept, children)  # idle axes: the parent's interval
             sums = np.bincount(parents, np.prod(bx.widths(children), axis=1), boxes.shape[0])
             np.testing.assert_allclose(sums, np.prod(bx.widths(boxes), axis=1), rtol=1e-12)
             checked += children.shape[0]
-    assert checked > 10_000
+    assert checked > 20_000
 
 
 def test_area_xy_matches_shapely_union():

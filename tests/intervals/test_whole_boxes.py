@@ -15,6 +15,7 @@ import shapely
 
 from intervals.boxes import area_xy, contains_points
 from intervals.localize import gomne
+from intervals.sonar.geometry import GUARD_M
 from intervals.sonar.idle import idle_axes, probes
 from intervals.sonar.scan import SonarBelt, SonarScan
 from scenarios.epochs import EpochRunner
@@ -54,6 +55,44 @@ def test_idle_axes_follow_the_walls_in_reach():
     cut = probes(boxes, idle)
     assert np.array_equal(cut[0, 0], [22.0, 22.0]) and np.array_equal(cut[0, 1:], boxes[0, 1:])
     assert np.all(cut[3, :, 0] == cut[3, :, 1])
+
+
+def test_idle_axes_equal_the_definition_on_random_walls():
+    """The compiled pass (left at the first wall that keeps neither axis idle) against the
+    module doc's definition written as numpy broadcasts, on random horizontal, vertical and
+    oblique walls (some long enough to span a box's reach, some meeting it at its edge) and
+    random boxes."""
+    rng = np.random.default_rng(17)
+    scan = _scan(np.full(DEFAULT_BELT.mount_xy.shape[0], 2.0))
+    assert scan.scene is not None
+    reach = scan.reach_m + scan.scene.mount_radius_m + GUARD_M
+    checked = np.zeros(3, dtype=int)
+    for _ in range(200):
+        walls = []
+        for kind in rng.integers(0, 3, int(rng.integers(0, 12))):
+            a = rng.uniform(0.0, 20.0, 2)
+            step = {0: [rng.uniform(0, 25), 0.0], 1: [0.0, rng.uniform(0, 25)]}
+            walls.append([a, a + step.get(int(kind), rng.uniform(-4, 4, 2))])
+        walls = np.array(walls, dtype=np.float64).reshape(-1, 2, 2)
+        lo = rng.uniform(-2.0, 22.0, (50, 3))
+        boxes = np.stack([lo, lo + rng.exponential(1.0, (50, 3))], axis=-1)
+        got = idle_axes(boxes, scan, walls)
+        w_lo, w_hi = boxes[:, None, :2, 0] - reach, boxes[:, None, :2, 1] + reach  # (N, 1, 2)
+        lo_w, hi_w = walls.min(axis=1)[None], walls.max(axis=1)[None]  # (1, m, 2)
+        meets = np.all((lo_w <= w_hi) & (w_lo <= hi_w), axis=2)
+        spans = (lo_w <= w_lo) & (w_hi <= hi_w)
+        flat = lo_w == hi_w
+        expected = np.stack(
+            [
+                np.all(~meets | (flat[..., 1] & spans[..., 0]), axis=1),
+                np.all(~meets | (flat[..., 0] & spans[..., 1]), axis=1),
+                ~meets.any(axis=1),
+            ],
+            axis=1,
+        )
+        np.testing.assert_array_equal(got, expected)
+        checked += expected.sum(axis=0)
+    assert np.all(checked > 100)  # each axis found idle often
 
 
 def _wrong(poses, scan: SonarScan, params) -> np.ndarray:
