@@ -29,7 +29,7 @@ from typing import Protocol
 
 import numpy as np
 
-from robotsim.control import Plan, limit_command
+from robotsim.control import Plan, limit_command, speed_limited
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap
 from robotsim.obstacles import NO_OBSTACLES, Obstacles
@@ -391,10 +391,13 @@ def _run_physics(
     bool.
 
     Contacts come from :meth:`World.on_wall_contact` and :meth:`World.on_obstacle_contact`
-    (pymunk's solver): their callbacks set flags that the loop reads and clears after each
-    step. With an ``observer``, the controller runs every ``control_stride`` steps (its
-    command held in between): at each such step ``stream`` gives the observer the samples
-    whose next state is known, and the controller steers on the observer's pose.
+    (pymunk's solver): their callbacks note the step under way. With an ``observer``, the
+    controller runs every ``control_stride`` steps (its command held in between): at each
+    such step ``stream`` gives the observer the samples whose next state is known, and the
+    controller steers on the observer's pose; without one it runs every step on the truth.
+    Between two control steps only the physics runs: the state read, the acceleration ramp
+    towards the held command (skipped once reached: :func:`limit_command` would return its
+    input) and the pymunk step.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -404,63 +407,51 @@ def _run_physics(
         robot.wheel_base_m,
     ).tolist()
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
+    closed = stream is not None and observer is not None
+    stride = control_stride if closed else 1
     states: list[tuple[float, float, float, float, float]] = []
-    commands: list[tuple[float, float]] = []
-    touched = [False, False]  # a wall, an obstacle during this step
-
-    def note_wall() -> None:
-        touched[0] = True
-
-    def note_obstacle() -> None:
-        touched[1] = True
-
-    sim_world.on_wall_contact(note_wall)
-    sim_world.on_obstacle_contact(note_obstacle)
-    contact = np.zeros(count, dtype=bool)
-    obstacle_contact = np.zeros(count, dtype=bool)
+    commands = np.zeros((count, 2))
+    touched: tuple[list[int], list[int]] = ([], [])  # the steps with a wall, an obstacle contact
+    sim_world.on_wall_contact(lambda: touched[0].append(sim_world.steps))
+    sim_world.on_obstacle_contact(lambda: touched[1].append(sim_world.steps))
     report_every = max(1, count // PROGRESS_REPORTS)
-    target = wanted = (0.0, 0.0)
+    next_report = 0
+    last = count - 1
+    target = reached = wanted_true = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
     for k in range(count):
-        if progress is not None and k % report_every == 0:
-            progress(k / count)
         if k in schedule:
             sim_world.teleport(schedule[k])
         now = state()
         states.append(now)
-        if stream is not None and observer is not None:
-            if k == count - 1:
-                stream.emit(k + 1, states, observer)
-                break
-            if k % control_stride == 0:  # a control tick: the samples so far, then the pose
-                stream.emit(k, states, observer)
-                x, y, theta = observer.pose()
-                wanted = command(k * dt_s, x, y, theta)
-        elif k == count - 1:
+        if k == last:
+            if closed:
+                stream.emit(count, states, observer)  # type: ignore[union-attr]
             break
-        else:
-            x, y, theta, _, _ = now
-            wanted = command(k * dt_s, x, y, theta)
-        commands.append(wanted)
-        wanted_v, wanted_omega = wanted
-        target = limit_command(
-            wanted_v * vv + wanted_omega * vw,
-            wanted_v * wv + wanted_omega * ww,
-            target,
-            dt_s,
-            robot,
-        )
+        if k % stride == 0:  # a control tick: the samples so far, then the pose, the command
+            if progress is not None and k >= next_report:
+                progress(k / count)
+                next_report = (k // report_every + 1) * report_every
+            if closed:
+                stream.emit(k, states, observer)  # type: ignore[union-attr]
+                x, y, theta = observer.pose()  # type: ignore[union-attr]
+            else:
+                x, y, theta, _, _ = now
+            wanted_v, wanted_omega = command(k * dt_s, x, y, theta)
+            commands[k : k + stride] = wanted_v, wanted_omega
+            wanted_true = (wanted_v * vv + wanted_omega * vw, wanted_v * wv + wanted_omega * ww)
+            reached = speed_limited(*wanted_true, robot)
+        if target != reached:
+            target = limit_command(*wanted_true, target, dt_s, robot)
         step(*target)
-        if touched[0]:
-            contact[k] = True
-            touched[0] = False
-        if touched[1]:
-            obstacle_contact[k] = True
-            touched[1] = False
     if progress is not None:
         progress(1.0)
-    commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
-    return np.array(states), np.array(commands, dtype=np.float64), contact, obstacle_contact
+    if count > 1:
+        commands[last] = commands[last - 1]  # the last sample repeats
+    contact = np.zeros(count, dtype=bool)
+    obstacle_contact = np.zeros(count, dtype=bool)
+    contact[touched[0]], obstacle_contact[touched[1]] = True, True
+    return np.array(states), commands, contact, obstacle_contact
 
 
 class _SensorStream:
