@@ -474,10 +474,14 @@ class _SensorStream:
         self.noise, self.robot, self.sensors = noise, robot, sensors
         self.sonar = sonar
         self.scans = scans
+        self._scan_samples = scans.tolist()
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.done = 0  # samples handed over so far
         self.t_s = np.arange(count) / rate_hz  # the log's sample times
         self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
+        # the per-sample factors of ticks_from_slip and the counting scale, once per run
+        self._slip_factor = 1.0 + sensors.encoders.slip_std * noise.slip  # (N, 2)
+        self._ticks_per_rad = robot.ticks_per_rev / (2.0 * np.pi)
         shape = (len(scans), sensors.sonar.count)  # the scans handed over, for the log
         self._true_range, self._readings = np.full(shape, np.nan), np.full(shape, np.nan)
         self._fault = np.zeros(shape, dtype=bool)
@@ -512,9 +516,9 @@ class _SensorStream:
                 rotation[j - start] = (
                     wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
                 )
-        turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
+        turned = rotation * self._slip_factor[start:stop]
         total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
-        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))  # row 0: the last
+        counted = np.floor(total * self._ticks_per_rad)  # row 0: the count so far
         ticks = (counted[1:] - counted[:-1]).astype(np.int64)
         self.turned = total[-1:]
         velocity = window[:, 3:5]
@@ -523,25 +527,29 @@ class _SensorStream:
         force = specific_force(velocity, rate_hz)[rows]
         accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
         t_s = self.t_s[start:stop]
-        first = self._scans_done  # the scans are handed over in order
-        m = np.arange(first, first + int(np.searchsorted(self.scans[first:], stop)))
-        in_block = self.scans[m]
-        readings = np.zeros((0, self.sensors.sonar.count))
-        if in_block.size:
+        first = end_scan = self._scans_done  # the scans are handed over in order
+        samples = self._scan_samples
+        while end_scan < len(samples) and samples[end_scan] < stop:
+            end_scan += 1
+        begin = 0
+        if end_scan > first:
+            m = slice(first, end_scan)
+            in_block = self.scans[m]
             pose = window[in_block - low, :3].copy()
             pose[:, 2] = wrap_angle(pose[:, 2])
             draws = tuple(draw[m] for draw in noise.sonar)
             true_range, readings, fault = self.sonar.scans(pose, in_block / rate_hz, draws)
             self._true_range[m], self._readings[m], self._fault[m] = true_range, readings, fault
-            self._scans_done += len(m)
-        begin = 0
-        for scan, sample in enumerate(in_block.tolist()):  # each scan after its sample
-            end = sample - start + 1
-            observer.odometry_block(
-                t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
-            )
-            observer.scan(float(t_s[end - 1]), readings[scan])
-            begin = end
-        if begin < stop - start:
+            self._scans_done = end_scan
+            for scan, sample in enumerate(samples[m]):  # each scan after its sample
+                end = sample - start + 1
+                observer.odometry_block(
+                    t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
+                )
+                observer.scan(float(t_s[end - 1]), readings[scan])
+                begin = end
+        if begin == 0:
+            observer.odometry_block(t_s, ticks, gyro, accel)
+        elif begin < stop - start:
             observer.odometry_block(t_s[begin:], ticks[begin:], gyro[begin:], accel[begin:])
         self.done = stop
