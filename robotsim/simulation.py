@@ -22,6 +22,7 @@ limits (``v_max``, ``omega_max``, ``a_max``) and handed to the world.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -407,9 +408,11 @@ def _run_physics(
         robot.wheel_base_m,
     ).tolist()
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
-    closed = stream is not None and observer is not None
-    stride = control_stride if closed else 1
     states: list[tuple[float, float, float, float, float]] = []
+    closed = None  # with an observer: hand the samples before a stop over; read the pose
+    if stream is not None and observer is not None:
+        closed = (functools.partial(stream.emit, states=states, observer=observer), observer.pose)
+    stride = control_stride if closed is not None else 1
     commands = np.zeros((count, 2))
     touched: tuple[list[int], list[int]] = ([], [])  # the steps with a wall, an obstacle contact
     sim_world.on_wall_contact(lambda: touched[0].append(sim_world.steps))
@@ -425,16 +428,16 @@ def _run_physics(
         now = state()
         states.append(now)
         if k == last:
-            if closed:
-                stream.emit(count, states, observer)  # type: ignore[union-attr]
+            if closed is not None:
+                closed[0](count)
             break
         if k % stride == 0:  # a control tick: the samples so far, then the pose, the command
             if progress is not None and k >= next_report:
                 progress(k / count)
                 next_report = (k // report_every + 1) * report_every
-            if closed:
-                stream.emit(k, states, observer)  # type: ignore[union-attr]
-                x, y, theta = observer.pose()  # type: ignore[union-attr]
+            if closed is not None:
+                closed[0](k)
+                x, y, theta = closed[1]()
             else:
                 x, y, theta, _, _ = now
             wanted_v, wanted_omega = command(k * dt_s, x, y, theta)
