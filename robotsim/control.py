@@ -28,14 +28,22 @@ class Controller(Protocol):
         ...
 
 
+def speed_limited(v_m_s: float, omega_rad_s: float, robot: RobotParams) -> tuple[float, float]:
+    """A wanted body velocity clamped to ``|v| <= v_max``, ``|omega| <= omega_max`` (what
+    :func:`limit_command` returns once the accelerations have reached it)."""
+    v = min(max(v_m_s, -robot.v_max_m_s), robot.v_max_m_s)
+    w = min(max(omega_rad_s, -robot.omega_max_rad_s), robot.omega_max_rad_s)
+    return v, w
+
+
 def limit_command(
     v_m_s: float, omega_rad_s: float, previous: tuple[float, float], dt_s: float, robot: RobotParams
 ) -> tuple[float, float]:
     """Clamp a wanted body velocity to ``|v| <= v_max``, ``|omega| <= omega_max`` and to the
-    accelerations ``|dv/dt| <= a_max``, ``|domega/dt| <= alpha_max`` from ``previous``."""
+    accelerations ``|dv/dt| <= a_max``, ``|domega/dt| <= alpha_max`` from ``previous``
+    (``previous`` itself when it is the clamped velocity: the ramp has reached it)."""
     dv, dw = robot.a_max_m_s2 * dt_s, robot.alpha_max_rad_s2 * dt_s
-    v = min(max(v_m_s, -robot.v_max_m_s), robot.v_max_m_s)
-    w = min(max(omega_rad_s, -robot.omega_max_rad_s), robot.omega_max_rad_s)
+    v, w = speed_limited(v_m_s, omega_rad_s, robot)
     v = min(max(v, previous[0] - dv), previous[0] + dv)
     w = min(max(w, previous[1] - dw), previous[1] + dw)
     return v, w

@@ -30,7 +30,9 @@ def wrap_angle(angle_rad):
     )  # a new array (or numpy float): the steps below work in place
     wrapped %= 2.0 * np.pi
     wrapped -= np.pi
-    if wrapped.size and wrapped.max() >= np.pi:  # rare: one comparison pass in the common case
+    # rare: one comparison pass in the common case (the ufunc's reduce: ndarray.max's
+    # Python wrapper costs more than the pass on the few angles of a closed-loop block)
+    if wrapped.size and np.maximum.reduce(wrapped, axis=None) >= np.pi:
         wrapped = np.where(wrapped >= np.pi, wrapped - 2.0 * np.pi, wrapped)[()]
     return wrapped
 

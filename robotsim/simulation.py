@@ -22,6 +22,7 @@ limits (``v_max``, ``omega_max``, ``a_max``) and handed to the world.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,7 +30,7 @@ from typing import Protocol
 
 import numpy as np
 
-from robotsim.control import Plan, limit_command
+from robotsim.control import Plan, limit_command, speed_limited
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap
 from robotsim.obstacles import NO_OBSTACLES, Obstacles
@@ -391,10 +392,13 @@ def _run_physics(
     bool.
 
     Contacts come from :meth:`World.on_wall_contact` and :meth:`World.on_obstacle_contact`
-    (pymunk's solver): their callbacks set flags that the loop reads and clears after each
-    step. With an ``observer``, the controller runs every ``control_stride`` steps (its
-    command held in between): at each such step ``stream`` gives the observer the samples
-    whose next state is known, and the controller steers on the observer's pose.
+    (pymunk's solver): their callbacks note the step under way. With an ``observer``, the
+    controller runs every ``control_stride`` steps (its command held in between): at each
+    such step ``stream`` gives the observer the samples whose next state is known, and the
+    controller steers on the observer's pose; without one it runs every step on the truth.
+    Between two control steps only the physics runs: the state read, the acceleration ramp
+    towards the held command (skipped once reached: :func:`limit_command` would return its
+    input) and the pymunk step.
     """
     dt_s = sim_world.dt_s
     # wanted (v, omega) -> wheel rates with nominal radii -> true body velocity (a 2x2 map)
@@ -405,62 +409,52 @@ def _run_physics(
     ).tolist()
     (vv, wv), (vw, ww) = to_true  # true = v * row 0 + omega * row 1
     states: list[tuple[float, float, float, float, float]] = []
-    commands: list[tuple[float, float]] = []
-    touched = [False, False]  # a wall, an obstacle during this step
-
-    def note_wall() -> None:
-        touched[0] = True
-
-    def note_obstacle() -> None:
-        touched[1] = True
-
-    sim_world.on_wall_contact(note_wall)
-    sim_world.on_obstacle_contact(note_obstacle)
-    contact = np.zeros(count, dtype=bool)
-    obstacle_contact = np.zeros(count, dtype=bool)
+    closed = None  # with an observer: hand the samples before a stop over; read the pose
+    if stream is not None and observer is not None:
+        closed = (functools.partial(stream.emit, states=states, observer=observer), observer.pose)
+    stride = control_stride if closed is not None else 1
+    commands = np.zeros((count, 2))
+    touched: tuple[list[int], list[int]] = ([], [])  # the steps with a wall, an obstacle contact
+    sim_world.on_wall_contact(lambda: touched[0].append(sim_world.steps))
+    sim_world.on_obstacle_contact(lambda: touched[1].append(sim_world.steps))
     report_every = max(1, count // PROGRESS_REPORTS)
-    target = wanted = (0.0, 0.0)
+    next_report = 0
+    last = count - 1
+    target = reached = wanted_true = (0.0, 0.0)
     step, state, command = sim_world.step, sim_world.state, controller.command
     for k in range(count):
-        if progress is not None and k % report_every == 0:
-            progress(k / count)
         if k in schedule:
             sim_world.teleport(schedule[k])
         now = state()
         states.append(now)
-        if stream is not None and observer is not None:
-            if k == count - 1:
-                stream.emit(k + 1, states, observer)
-                break
-            if k % control_stride == 0:  # a control tick: the samples so far, then the pose
-                stream.emit(k, states, observer)
-                x, y, theta = observer.pose()
-                wanted = command(k * dt_s, x, y, theta)
-        elif k == count - 1:
+        if k == last:
+            if closed is not None:
+                closed[0](count)
             break
-        else:
-            x, y, theta, _, _ = now
-            wanted = command(k * dt_s, x, y, theta)
-        commands.append(wanted)
-        wanted_v, wanted_omega = wanted
-        target = limit_command(
-            wanted_v * vv + wanted_omega * vw,
-            wanted_v * wv + wanted_omega * ww,
-            target,
-            dt_s,
-            robot,
-        )
+        if k % stride == 0:  # a control tick: the samples so far, then the pose, the command
+            if progress is not None and k >= next_report:
+                progress(k / count)
+                next_report = (k // report_every + 1) * report_every
+            if closed is not None:
+                closed[0](k)
+                x, y, theta = closed[1]()
+            else:
+                x, y, theta, _, _ = now
+            wanted_v, wanted_omega = command(k * dt_s, x, y, theta)
+            commands[k : k + stride] = wanted_v, wanted_omega
+            wanted_true = (wanted_v * vv + wanted_omega * vw, wanted_v * wv + wanted_omega * ww)
+            reached = speed_limited(*wanted_true, robot)
+        if target != reached:
+            target = limit_command(*wanted_true, target, dt_s, robot)
         step(*target)
-        if touched[0]:
-            contact[k] = True
-            touched[0] = False
-        if touched[1]:
-            obstacle_contact[k] = True
-            touched[1] = False
     if progress is not None:
         progress(1.0)
-    commands.append(commands[-1] if count > 1 else (0.0, 0.0))  # the last sample repeats
-    return np.array(states), np.array(commands, dtype=np.float64), contact, obstacle_contact
+    if count > 1:
+        commands[last] = commands[last - 1]  # the last sample repeats
+    contact = np.zeros(count, dtype=bool)
+    obstacle_contact = np.zeros(count, dtype=bool)
+    contact[touched[0]], obstacle_contact[touched[1]] = True, True
+    return np.array(states), commands, contact, obstacle_contact
 
 
 class _SensorStream:
@@ -483,10 +477,14 @@ class _SensorStream:
         self.noise, self.robot, self.sensors = noise, robot, sensors
         self.sonar = sonar
         self.scans = scans
+        self._scan_samples = scans.tolist()
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.done = 0  # samples handed over so far
         self.t_s = np.arange(count) / rate_hz  # the log's sample times
         self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
+        # the per-sample factors of ticks_from_slip and the counting scale, once per run
+        self._slip_factor = 1.0 + sensors.encoders.slip_std * noise.slip  # (N, 2)
+        self._ticks_per_rad = robot.ticks_per_rev / (2.0 * np.pi)
         shape = (len(scans), sensors.sonar.count)  # the scans handed over, for the log
         self._true_range, self._readings = np.full(shape, np.nan), np.full(shape, np.nan)
         self._fault = np.zeros(shape, dtype=bool)
@@ -521,9 +519,9 @@ class _SensorStream:
                 rotation[j - start] = (
                     wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
                 )
-        turned = rotation * (1.0 + self.sensors.encoders.slip_std * noise.slip[start:stop])
+        turned = rotation * self._slip_factor[start:stop]
         total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
-        counted = np.floor(total * (robot.ticks_per_rev / (2.0 * np.pi)))  # row 0: the last
+        counted = np.floor(total * self._ticks_per_rad)  # row 0: the count so far
         ticks = (counted[1:] - counted[:-1]).astype(np.int64)
         self.turned = total[-1:]
         velocity = window[:, 3:5]
@@ -532,25 +530,29 @@ class _SensorStream:
         force = specific_force(velocity, rate_hz)[rows]
         accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
         t_s = self.t_s[start:stop]
-        first = self._scans_done  # the scans are handed over in order
-        m = np.arange(first, first + int(np.searchsorted(self.scans[first:], stop)))
-        in_block = self.scans[m]
-        readings = np.zeros((0, self.sensors.sonar.count))
-        if in_block.size:
+        first = end_scan = self._scans_done  # the scans are handed over in order
+        samples = self._scan_samples
+        while end_scan < len(samples) and samples[end_scan] < stop:
+            end_scan += 1
+        begin = 0
+        if end_scan > first:
+            m = slice(first, end_scan)
+            in_block = self.scans[m]
             pose = window[in_block - low, :3].copy()
             pose[:, 2] = wrap_angle(pose[:, 2])
             draws = tuple(draw[m] for draw in noise.sonar)
             true_range, readings, fault = self.sonar.scans(pose, in_block / rate_hz, draws)
             self._true_range[m], self._readings[m], self._fault[m] = true_range, readings, fault
-            self._scans_done += len(m)
-        begin = 0
-        for scan, sample in enumerate(in_block.tolist()):  # each scan after its sample
-            end = sample - start + 1
-            observer.odometry_block(
-                t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
-            )
-            observer.scan(float(t_s[end - 1]), readings[scan])
-            begin = end
-        if begin < stop - start:
+            self._scans_done = end_scan
+            for scan, sample in enumerate(samples[m]):  # each scan after its sample
+                end = sample - start + 1
+                observer.odometry_block(
+                    t_s[begin:end], ticks[begin:end], gyro[begin:end], accel[begin:end]
+                )
+                observer.scan(float(t_s[end - 1]), readings[scan])
+                begin = end
+        if begin == 0:
+            observer.odometry_block(t_s, ticks, gyro, accel)
+        elif begin < stop - start:
             observer.odometry_block(t_s[begin:], ticks[begin:], gyro[begin:], accel[begin:])
         self.done = stop

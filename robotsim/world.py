@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 import shapely
+from pymunk._chipmunk import lib as _chipmunk
 
 from robotsim.errors import RobotsimError
 from robotsim.maps import SegmentMap, point_segment_distance
@@ -159,6 +160,15 @@ class World:
         space.add(body, disk, control, pivot, gear)
 
         self._space, self._body, self._control = space, body, control
+        # the per-step path calls pymunk's C functions on the bodies and the space directly:
+        # pymunk's properties and Space.step (its checks of newly added bodies, the adds and
+        # removals deferred during a step) cost more than the step itself, and nothing is
+        # added to or removed from the space after this constructor
+        self._robot_ref, self._control_ref, self._space_ref = (
+            body._body,
+            control._body,
+            space._space,
+        )
         self._contact: dict[int, Callable[[], None]] = {}
 
         def post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, data: dict) -> None:
@@ -262,25 +272,36 @@ class World:
     def step(self, v_m_s: float, omega_rad_s: float) -> None:
         """Advance ``1 / step_hz`` seconds while the wheels try to move the robot at the
         true body velocity ``(v_m_s, omega_rad_s)`` (robot frame)."""
-        control, space, substep_s = self._control, self._space, self._substep_s
+        control, space, substep_s = self._control_ref, self._space_ref, self._substep_s
         # pymunk moves a body with the velocity solved one substep earlier, so the velocity
         # set now acts from ``substep_s`` after the step's start to as long after its end:
         # point it along the heading at the middle of that interval
-        heading = self._body.angle + omega_rad_s * self._velocity_lead_s
-        control.velocity = (v_m_s * math.cos(heading), v_m_s * math.sin(heading))
-        control.angular_velocity = omega_rad_s
+        heading = _chipmunk.cpBodyGetAngle(self._robot_ref) + omega_rad_s * self._velocity_lead_s
+        _chipmunk.cpBodySetVelocity(control, (v_m_s * math.cos(heading), v_m_s * math.sin(heading)))
+        _chipmunk.cpBodySetAngularVelocity(control, omega_rad_s)
         for _ in self._substeps:
-            space.step(substep_s)
+            _chipmunk.cpSpaceStep(space, substep_s)
         self._steps += 1
         self.t_s = self._steps * self.dt_s
         if self._movers:
             self._place_movers()
 
+    @property
+    def steps(self) -> int:
+        """The steps taken so far (during :meth:`step`, the index of the step under way)."""
+        return self._steps
+
     def state(self) -> tuple[float, float, float, float, float]:
         """True ``(x_m, y_m, theta_rad, v_m_s, omega_rad_s)``: theta unwrapped, ``v`` the
         velocity component along the heading."""
-        body = self._body
-        x, y = body.position
-        vx, vy = body.velocity
-        theta = body.angle
-        return x, y, theta, vx * math.cos(theta) + vy * math.sin(theta), body.angular_velocity
+        body = self._robot_ref
+        position = _chipmunk.cpBodyGetPosition(body)
+        velocity = _chipmunk.cpBodyGetVelocity(body)
+        theta = _chipmunk.cpBodyGetAngle(body)
+        return (
+            position.x,
+            position.y,
+            theta,
+            velocity.x * math.cos(theta) + velocity.y * math.sin(theta),
+            _chipmunk.cpBodyGetAngularVelocity(body),
+        )

@@ -45,9 +45,8 @@ def wheel_rotation_increments(pose, robot: RobotParams) -> np.ndarray:
         heading = pose[:-1, 2] + 0.5 * turn
         ds = step[:, 0] * np.cos(heading) + step[:, 1] * np.sin(heading)
         half = 0.5 * robot.wheel_base_m * turn
-        left_radius_m, right_radius_m = robot.true_radii_m
-        rotation[1:, 0] = (ds - half) / left_radius_m
-        rotation[1:, 1] = (ds + half) / right_radius_m
+        rotation[1:, 0] = (ds - half) / robot.true_wheel_radius_left_m
+        rotation[1:, 1] = (ds + half) / robot.true_wheel_radius_right_m
     return rotation
 
 

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robotsim.control import Route, ScriptedProfile, limit_command
+from robotsim.control import Route, ScriptedProfile, limit_command, speed_limited
 from robotsim.errors import RobotsimError
 from robotsim.maps import builtin_map, point_segment_distance
 from robotsim.robot import RobotParams
@@ -87,6 +87,15 @@ def test_limited_commands_respect_speed_and_acceleration_limits(wanted):
         if abs(v) <= ROBOT.v_max_m_s and abs(v - previous[0]) < ROBOT.a_max_m_s2 * dt_s - 1e-12:
             assert limited[0] == v
         previous = limited
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-5, 5), st.floats(-5, 5), st.floats(1e-4, 0.1))
+def test_a_ramp_that_reached_the_clamped_command_stays_there(v, omega, dt_s):
+    # the simulator skips limit_command once the target is the clamped command: exact
+    reached = speed_limited(v, omega, ROBOT)
+    assert limit_command(v, omega, reached, dt_s, ROBOT) == reached
+    assert abs(reached[0]) <= ROBOT.v_max_m_s and abs(reached[1]) <= ROBOT.omega_max_rad_s
 
 
 def test_simulated_truth_respects_the_robot_limits():

@@ -90,6 +90,31 @@ def test_wall_contact_callback_fires_only_while_the_robot_touches_a_wall():
     assert not free_contacts  # nothing in free space
 
 
+def test_the_step_path_moves_the_robot_as_pymunks_public_api_does():
+    """World.step and World.state call pymunk's C functions directly; a world driven through
+    pymunk's public properties and Space.step instead gives the same states, bit for bit
+    (free motion, then pressed against hall's east wall, turning)."""
+    fast = World(builtin_map("hall"), ROBOT, (8.5, 3.5, 0.1))
+    public = World(builtin_map("hall"), ROBOT, (8.5, 3.5, 0.1))
+    # the reference reaches into the world's pymunk objects: the public API on them
+    body, control, space = public._body, public._control, public._space
+    lead_s, substep_s = public._velocity_lead_s, public._substep_s
+    contacts: list[int] = []
+    fast.on_wall_contact(lambda: contacts.append(fast.steps))
+    for step in range(300):
+        v, omega = (0.6, 0.3 * np.sin(0.05 * step))
+        fast.step(v, omega)
+        heading = body.angle + omega * lead_s
+        control.velocity = (v * np.cos(heading), v * np.sin(heading))
+        control.angular_velocity = omega
+        space.step(substep_s)
+        (x, y), (vx, vy), theta = body.position, body.velocity, body.angle
+        expected = (x, y, theta, vx * np.cos(theta) + vy * np.sin(theta), body.angular_velocity)
+        assert fast.state() == expected, step
+    assert fast.steps == 300
+    assert contacts and max(contacts) == 299  # pressed against the wall to the end
+
+
 def test_kidnap_moves_the_robot_without_odometry():
     profile = ScriptedProfile([0.0], [0.2], [0.1])
     log = run(profile, (2.0, 2.0, 0.0), 6.0, kidnaps=(KidnapEvent(3.0, (7.0, 6.0, 2.0)),))
