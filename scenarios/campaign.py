@@ -133,9 +133,9 @@ TASKS_PER_WORKER = 4
 #: and 0.18 s with these (BENCHMARKS.md, "Campaign throughput"); tasks of a third of a second
 #: and more need no finer polling, and there is no dashboard to feed. And the workers start
 #: without the ``MALLOC_TRIM_THRESHOLD_=65536`` dask's nannies set by default: with it glibc
-#: hands every freed block of more than 64 KB back to the system and never raises its mmap
-#: threshold, so a run's arrays are mapped and faulted in again and again (40 000 page faults
-#: instead of 1 000 on a 30 s ``hall`` run, 35 to 40 % more CPU a run).
+#: gives the free top of its heap beyond 64 KB back to the system and keeps its mmap threshold
+#: at 128 KB (never raised), so a run's arrays are mapped and faulted in again and again
+#: (40 000 page faults instead of 1 000 on a 30 s ``hall`` run, 35 to 40 % more CPU a run).
 LOCAL_CLUSTER_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
