@@ -34,7 +34,8 @@ tcp://HOST:PORT`` joins one). numba's kernels are compiled once in this process 
 worker runs, so local workers load them from the disk cache instead of compiling them in
 parallel into the same cache; workers run with ``NUMBA_NUM_THREADS=1``. The workers start,
 and import what a run needs (:func:`import_run_path`), while this process compiles: the
-start of the pool or of the cluster is hidden behind the warm-up. A dask task holds runs
+start of the pool is hidden behind the warm-up; a dask cluster, slower to start, starts (or
+is joined) before the campaign file is even read (:func:`dask_client`). A dask task holds runs
 worth :data:`DASK_TASK_SIMULATED_S` simulated seconds, fewer when that would leave a worker
 less than :data:`TASKS_PER_WORKER` tasks (:func:`dask_batch`).
 """
@@ -130,13 +131,18 @@ TASKS_PER_WORKER = 4
 #: default), the memory and system monitors, work stealing and the workers' statistical
 #: profiler. Idle, a cluster of two workers took 1.1 s of CPU per 10 s with dask's defaults
 #: and 0.18 s with these (BENCHMARKS.md, "Campaign throughput"); tasks of a third of a second
-#: and more need no finer polling, and there is no dashboard to feed.
+#: and more need no finer polling, and there is no dashboard to feed. And the workers start
+#: without the ``MALLOC_TRIM_THRESHOLD_=65536`` dask's nannies set by default: with it glibc
+#: gives the free top of its heap beyond 64 KB back to the system and keeps its mmap threshold
+#: at 128 KB (never raised), so a run's arrays are mapped and faulted in again and again
+#: (40 000 page faults instead of 1 000 on a 30 s ``hall`` run, 35 to 40 % more CPU a run).
 LOCAL_CLUSTER_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.scheduler.work-stealing-interval": "1s",
     "distributed.worker.profile.enabled": False,
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
 }
 
 
@@ -601,20 +607,13 @@ def dask_batch(runs: Sequence[CampaignRun], workers: int) -> int:
     return max(1, min(wanted, spread))
 
 
-def execute_dask(
-    runs: Sequence[CampaignRun],
-    scheduler: str | None,
-    workers: int,
-    sink: RowsSink,
-    *,
-    batch: int | None = None,
-    prepare: Callable[[], None] | None = None,
-) -> None:
-    """Run ``runs`` on dask.distributed: the scheduler at ``scheduler`` (``tcp://HOST:PORT``),
-    or a ``LocalCluster`` of ``workers`` processes when None; ``batch`` runs per task
-    (default :func:`dask_batch` for the workers the scheduler has). The cluster starts (or
-    the client connects), ``distributed`` is imported and the workers import the run path in a
-    thread while ``prepare`` runs here."""
+@contextlib.contextmanager
+def dask_client(scheduler: str | None, workers: int) -> Iterator[Future[Any]]:
+    """The future of a dask client, started in a thread: of the scheduler at ``scheduler``
+    (``tcp://HOST:PORT``), or of a new ``LocalCluster`` of ``workers`` processes when None;
+    ``distributed`` is imported and the workers import the run path in that thread, so that
+    what is done here meanwhile (reading the campaign, the warm-up) hides the start. The
+    client and its cluster are closed on exit."""
     if importlib.util.find_spec("distributed") is None:  # imported in the starting thread
         raise ScenarioError(
             None,
@@ -627,15 +626,29 @@ def execute_dask(
         starter = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="dask-start"))
         starting = starter.submit(_start_dask, scheduler, workers)
         stack.callback(_close_dask, starting)
-        if prepare is not None:
-            prepare()
-        client = starting.result()
-        from distributed import as_completed
+        yield starting
 
-        size = batch or dask_batch(runs, max(1, sum(client.nthreads().values())))
-        futures = client.map(run_batch, batched(runs, size), pure=False)
-        for future in as_completed(futures):
-            sink(future.result())
+
+def execute_dask(
+    runs: Sequence[CampaignRun],
+    starting: Future[Any],
+    sink: RowsSink,
+    *,
+    batch: int | None = None,
+    prepare: Callable[[], None] | None = None,
+) -> None:
+    """Run ``runs`` on the dask client ``starting`` will give (:func:`dask_client`), ``batch``
+    runs per task (default :func:`dask_batch` for the workers the scheduler has), after
+    ``prepare`` (the warm-up), which runs here while the client starts."""
+    if prepare is not None:
+        prepare()
+    client = starting.result()
+    from distributed import as_completed
+
+    size = batch or dask_batch(runs, max(1, sum(client.nthreads().values())))
+    futures = client.map(run_batch, batched(runs, size), pure=False)
+    for future in as_completed(futures):
+        sink(future.result())
 
 
 def _start_dask(scheduler: str | None, workers: int) -> Any:
@@ -794,20 +807,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``robotsim campaign``: run what is missing, merge the table; exit 1 if a run failed."""
-    campaign = load_campaign(args.campaign)
     for option, value in (("--workers", args.workers), ("--batch", args.batch)):
         if value is not None and value < 1:
             raise ScenarioError(None, option, f"must be at least 1, got {value}")
-    folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
-    folder.prepare(campaign, args.resume)
-    finished = run_campaign(
-        campaign,
-        folder,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        cluster=args.cluster,
-        batch=args.batch,
-    )
+    workers = worker_count(args.workers)
+    with contextlib.ExitStack() as stack:
+        dask = None
+        if args.scheduler is not None or args.cluster is not None:
+            dask = stack.enter_context(dask_client(args.scheduler, workers))
+        campaign = load_campaign(args.campaign)
+        folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
+        folder.prepare(campaign, args.resume)
+        finished = run_campaign(
+            campaign, folder, workers=workers, scheduler=args.scheduler, dask=dask, batch=args.batch
+        )
     if not finished:
         left = len(campaign.runs) - len(folder.done_keys())
         print(
@@ -822,24 +835,29 @@ def main(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def worker_count(workers: int | None) -> int:
+    """The worker processes of a campaign: ``workers``, by default every core."""
+    return workers or os.cpu_count() or 1
+
+
 def run_campaign(
     campaign: Campaign,
     folder: ResultsFolder,
     *,
     workers: int | None = None,
     scheduler: str | None = None,
-    cluster: str | None = None,
+    dask: Future[Any] | None = None,
     batch: int | None = None,
 ) -> bool:
     """Run the runs of ``campaign`` without a part in the prepared ``folder``, committing
     each row as it comes, with the progress on stderr: on a local pool of ``workers``
-    processes (default: every core), or on dask (``scheduler`` address, or ``cluster =
-    "local"``), ``batch`` runs per task. Returns False when a worker process died (its runs
+    processes (default: every core), or on the dask client ``dask`` will give
+    (:func:`dask_client`; of the scheduler at ``scheduler``, or of a ``LocalCluster`` when
+    None), ``batch`` runs per task. Returns False when a worker process died (its runs
     stay missing, for a resume), True when every run has its part."""
     done = folder.done_keys()
     missing = [run for run in campaign.runs if run.key not in done]
-    workers = workers or os.cpu_count() or 1
-    on_dask = scheduler is not None or cluster is not None
+    workers = worker_count(workers)
     total = len(campaign.runs)
     print(
         f"campaign {campaign.name}: {total} runs, {total - len(missing)} already done, "
@@ -858,8 +876,8 @@ def run_campaign(
             # the local workers load what this process compiles; a remote cluster's workers
             # compile on their own machines
             prepare = (lambda: warm_up(missing)) if scheduler is None else None
-            if on_dask:
-                execute_dask(missing, scheduler, workers, sink, batch=batch, prepare=prepare)
+            if dask is not None:
+                execute_dask(missing, dask, sink, batch=batch, prepare=prepare)
             else:
                 execute_local(missing, workers, sink, batch=batch or LOCAL_BATCH, prepare=prepare)
     except BrokenProcessPool:
