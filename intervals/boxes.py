@@ -369,6 +369,18 @@ def _meets(lo, hi, region_lo, region_hi, i, r):
 
 
 @numba.njit(cache=True)
+def _larger(a, b):
+    """``np.maximum`` of two floats: ``b`` on ties, as numpy (the same signed zeros)."""
+    return a if a > b else b
+
+
+@numba.njit(cache=True)
+def _smaller(a, b):
+    """``np.minimum`` of two floats: ``b`` on ties, as numpy."""
+    return a if a < b else b
+
+
+@numba.njit(cache=True)
 def _clip_into(lo, hi, region_lo, region_hi, clipped_lo, clipped_hi, held):
     """:func:`clip_to_boxes` on ``lo, hi (N, d)`` and ``region_lo, region_hi (M, d)``, into
     ``clipped_lo, clipped_hi (N, d)`` (initialised ``+inf``, ``-inf``) and ``held (N,)``."""
@@ -379,8 +391,10 @@ def _clip_into(lo, hi, region_lo, region_hi, clipped_lo, clipped_hi, held):
             inside = True
             for a in range(lo.shape[1]):
                 inside &= region_lo[r, a] <= lo[i, a] and hi[i, a] <= region_hi[r, a]
-                clipped_lo[i, a] = min(clipped_lo[i, a], max(lo[i, a], region_lo[r, a]))
-                clipped_hi[i, a] = max(clipped_hi[i, a], min(hi[i, a], region_hi[r, a]))
+                lower = _larger(lo[i, a], region_lo[r, a])
+                upper = _smaller(hi[i, a], region_hi[r, a])
+                clipped_lo[i, a] = _smaller(clipped_lo[i, a], lower)
+                clipped_hi[i, a] = _larger(clipped_hi[i, a], upper)
             held[i] |= inside
 
 
