@@ -87,6 +87,20 @@ def _sandwich(left, middle, temp, out) -> None:
             out[i, j] = total
 
 
+@numba.njit
+def _finish(new_mean, new_cov, addend) -> int:
+    """``new_cov (n, n) = sym(new_cov + addend)`` (``Q``, or the update's ``(K R) K^T``); the
+    status of the belief ``(new_mean, new_cov)``."""
+    n = new_cov.shape[0]
+    for i in range(n):
+        for j in range(n):
+            new_cov[i, j] += addend[i, j]
+    symmetrise_in_place(new_cov)
+    if not (all_finite(new_mean) and all_finite(new_cov)):
+        return NOT_FINITE
+    return OK
+
+
 # As in localization.compiled.ukf: each step is written once per run (``*_run``, its scratch
 # passed in as one float array that it carves), with the arguments of the UKF's runs
 # (:mod:`localization.compiled.batch` loops either over a batch), the lean entries call the run
@@ -128,13 +142,7 @@ def predict_run(
     for a in angles:
         new_mean[a] = wrap_angle(new_mean[a])
     _sandwich(jac, prior, temp, new_cov)  # (F P) F^T
-    for i in range(n):
-        for j in range(n):
-            new_cov[i, j] += q[i, j]
-    symmetrise_in_place(new_cov)
-    if not (all_finite(new_mean) and all_finite(new_cov)):
-        return NOT_FINITE
-    return OK
+    return _finish(new_mean, new_cov, q)
 
 
 @numba.njit
@@ -186,13 +194,7 @@ def update_run(
             joseph[i, j] = (1.0 if i == j else 0.0) - total
     _sandwich(joseph, prior, temp, new_cov)  # (A P) A^T
     _sandwich(gain, r, temp_noise, noise_part)  # (K R) K^T
-    for i in range(n):
-        for j in range(n):
-            new_cov[i, j] += noise_part[i, j]
-    symmetrise_in_place(new_cov)
-    if not (all_finite(new_mean) and all_finite(new_cov)):
-        return NOT_FINITE
-    return OK
+    return _finish(new_mean, new_cov, noise_part)
 
 
 # ------------------------------------------------------------------- cached built-in entries
