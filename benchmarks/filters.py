@@ -40,8 +40,9 @@ a batch mode; looping over runs costs its one-run time per run-step). Targets (i
 UKF at least 8x filterpy's on one filter, at least 50x batched; (issue 17, with the fair
 setup): at least 40x and 150x; both against the faster of filterpy's two setups. (3) Where
 our one-filter time goes, and the same UKF step as bare numpy/LAPACK calls
-(:func:`floor_ukf_run`). ``--profile`` adds a cProfile of our numpy step; ``--write`` puts the
-results into their section of ``BENCHMARKS.md``.
+(:func:`floor_ukf_run`). ``--profile`` adds a cProfile of our numpy step; ``--write`` replaces the generated
+block of its section of ``BENCHMARKS.md`` (between its markers: setup, checks and tables), not
+the findings written around it.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ from collections.abc import Callable
 from functools import partial
 
 import numpy as np
-from _common import machine_line, markdown_table, write_section
+from _common import machine_line, markdown_table, write_generated
 from filter_peers import (
     Problem,
     ctrv_F,
@@ -645,10 +646,9 @@ def main(argv: list[str] | None = None) -> int:
                 ratios,
                 targets,
                 parts,
-                ANALYSIS,
             ]
         )
-        write_section(SECTION, body)
+        write_generated(SECTION, "benchmarks/filters.py", body)
     return 0
 
 
@@ -664,44 +664,6 @@ unwrapped measurements); Stone Soup and the textbook UKF run continuous. Until 2
 section gave filterpy our batched model function and our general `wrap_angle` as callbacks
 (about 170 and 190 us of a 440 us step, as measured for issue 17) and timed the two sides
 one after the other, best of 3: that flattered us (UKF 32.8x, batched 306x, EKF 6.8x then)."""
-
-ANALYSIS = """\
-Findings (ranges over the runs of 2026-12-01, each with the load noted above; two runs half an
-hour apart differed by up to 30 % in a ratio, wall and CPU ratios of one run by up to 25 %):
-
-- UKF, one filter: our compiled path is 10-14x filterpy's faster setup (heading continuous,
-  its defaults) and 14-24x its wrapped setup: issue 7's 8x holds, issue 17's 40x does not. The
-  old setup showed 33x. filterpy's step (270-330 us CPU here) is its Python loop over the 11
-  sigma points: 11 calls of the user's scalar CTRV (about 40 us CPU) and per-point residuals
-  and outer products; the user's wrapping callbacks add 130-210 us. Our compiled step (25-33
-  us CPU here, 14-21 us on an idle machine) is mostly the Python glue around its two compiled
-  calls (issue 17).
-- Stone Soup's UKF takes about 1 ms a step although its model is called once on all the
-  sigma points (not profiled here; each step builds state, prediction, detection and
-  hypothesis objects and matrix views): our compiled UKF is 30-47x, our numpy path 8-11x.
-- The textbook numpy UKF (`textbook_ukf.py`, about 40 lines) takes 75-107 us CPU a step: only
-  3-4x our compiled path, and slightly faster than our numpy path (it takes 0.7-1.0 of its
-  time; about what `floor_ukf_run` takes). On one filter our numpy path's generality (belief
-  objects and their checks, moments about the centre point, angle handling, batch-safe
-  LAPACK calls) costs a little more than its fewer numpy calls save.
-- Batched (1000 runs in one call, against a peer's one-filter time per run-step): our compiled
-  UKF is 55-64x filterpy's faster setup, 80-111x its wrapped one, 190-220x Stone Soup's:
-  issue 7's 50x holds narrowly, issue 17's 150x does not. Under this load the batched
-  run-step costs 4.6-5.3 us CPU against 2.3 us wall on an idle machine (2026-11-22), a larger
-  inflation than the one-filter step's; the batched ratios measured here are likely low.
-- EKF: our compiled EKF is only 1.8-3.0x filterpy's EKF (47-57 us CPU a step: a few numpy
-  calls on 5x5 around the user's scalar model and Jacobian), and our numpy EKF is 3x slower
-  than filterpy's: its model calls alone (`ctrv_jacobian` + `ctrv_transition`, written for
-  batches) cost about 8 times the user's scalar ones (table above). Stone Soup's EKF: 14-17x
-  our compiled one. Batched, our compiled EKF is 16-21x filterpy looped.
-- What changed from the previous figures (UKF 32.8x, batched 306x, EKF 6.8x, best of 3, one
-  side after the other): filterpy now gets callbacks a user would write (scalar `math` on one
-  state) instead of our batched model function and general `wrap_angle`, and its default
-  (continuous-heading) setup is measured too, which is faster still; the repetitions of all
-  filters alternate in one process and medians are kept, so load falls on every side alike.
-  The machine is also another one (Intel Xeon, 2 cores, heavily shared, where the earlier
-  figures were measured on an AMD EPYC).
-"""
 
 
 if __name__ == "__main__":

@@ -42,7 +42,12 @@ from _common import machine_line, markdown_table
 
 from localization.compiled import motion
 from localization.compiled.lean import LeanUKF
-from localization.compiled.ukf import predict_run, predict_scratch, update_run, update_scratch
+from localization.compiled.ukf import (
+    predict_run,
+    predict_scratch_length,
+    update_run,
+    update_scratch_length,
+)
 from localization.gaussian import Gaussian
 from localization.models import MeasurementModel, ProcessModel
 from localization.motion_models import CTRV, pose_model
@@ -86,7 +91,7 @@ def bare_step(mean, cov, z) -> None:
         _ANGLES,
         prior_mean,
         prior_cov,
-        predict_scratch(5, 5),
+        np.empty(predict_scratch_length(5, 5)),
     )
     update_run(
         motion.leading_entries_point,
@@ -100,7 +105,7 @@ def bare_step(mean, cov, z) -> None:
         _ANGLES,
         mean,
         cov,
-        update_scratch(5, 3),
+        np.empty(update_scratch_length(5, 3)),
     )
 
 

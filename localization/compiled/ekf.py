@@ -28,7 +28,7 @@ with ``sym(M) = (M + M^T) / 2``. Kernel conventions (the per-point kernels of
 
 Entries. As in :mod:`localization.compiled.ukf`: each step is written once for one run
 (:func:`predict_run`, :func:`update_run`, kernels and scratch passed in), a batch loops a run
-function over its runs (:func:`batched_predict`, :func:`batched_update`), the lean EKF calls
+function over its runs (:mod:`localization.compiled.batch`, the UKF's loop), the lean EKF calls
 the run functions on its own scratch; the entries Python calls are module-level and cached on
 disk for the built-in kernels (one prediction entry switches between the four motion models by
 their number in :data:`BUILTIN_PROCESS_KERNELS`); a user's own kernels get an uncached entry,
@@ -46,8 +46,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numba.extending import register_jitable
 
 from localization.compiled import motion
+from localization.compiled.batch import batched_predict, batched_update, carve
 from localization.compiled.glue import (
     NOT_FINITE,
     NOT_POSITIVE_DEFINITE,
@@ -55,6 +57,7 @@ from localization.compiled.glue import (
     angle_array,
     call_entry,
     entry_arrays,
+    read_only,
 )
 from localization.compiled.linalg import (
     all_finite,
@@ -84,49 +87,54 @@ def _sandwich(left, middle, temp, out) -> None:
             out[i, j] = total
 
 
-# As in localization.compiled.ukf: each step is written once per run (``*_run``, scratch passed
-# in), the batched cores loop a run function ``run(selector, x, P, ...)`` over the runs, the
-# lean entries call the run functions on the filter's own scratch.
+@numba.njit
+def _finish(new_mean, new_cov, addend) -> int:
+    """``new_cov (n, n) = sym(new_cov + addend)`` (``Q``, or the update's ``(K R) K^T``); the
+    status of the belief ``(new_mean, new_cov)``."""
+    n = new_cov.shape[0]
+    for i in range(n):
+        for j in range(n):
+            new_cov[i, j] += addend[i, j]
+    symmetrise_in_place(new_cov)
+    if not (all_finite(new_mean) and all_finite(new_cov)):
+        return NOT_FINITE
+    return OK
+
+
+# As in localization.compiled.ukf: each step is written once per run (``*_run``, its scratch
+# passed in as one float array that it carves), with the arguments of the UKF's runs
+# (:mod:`localization.compiled.batch` loops either over a batch), the lean entries call the run
+# functions on the filter's own scratch.
+
+
+@register_jitable
+def predict_scratch_length(n, q):
+    """The floats of a prediction's scratch (:func:`predict_run`) of ``n`` states (``q = n``,
+    the noise dimension :mod:`localization.compiled.batch` passes)."""
+    return (1 + 2 * n) * n
+
+
+@register_jitable
+def update_scratch_length(n, m):
+    """The floats of the scratch of an update (:func:`update_run`) of ``n`` states by ``m``
+    measurements."""
+    return (1 + 2 * m + 3 * n) * n + (2 + 3 * n + 2 * m) * m
 
 
 @numba.njit
-def predict_scratch(n):
-    """Scratch of a prediction of ``n`` states: ``(point (n,), jac (n, n), temp (n, n))``."""
-    return np.empty(n), np.empty((n, n)), np.empty((n, n))
-
-
-@numba.njit
-def update_scratch(n, m):
-    """Scratch of an update of ``n`` states by ``m`` measurements: ``(point (n,), z_pred (m,),
-    innovation (m,), jac (m, n), cross (n, m), s_cov (m, m), s_chol (m, m), gain_t (m, n),
-    gain (n, m), joseph (n, n), temp (n, n), noise_part (n, n), temp_noise (n, m))``."""
-    return (
-        np.empty(n),
-        np.empty(m),
-        np.empty(m),
-        np.empty((m, n)),
-        np.empty((n, m)),
-        np.empty((m, m)),
-        np.empty((m, m)),
-        np.empty((m, n)),
-        np.empty((n, m)),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.empty((n, m)),
-    )
-
-
-@numba.njit
-def predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, scratch) -> int:
+def predict_run(
+    f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, scratch
+) -> int:
     """EKF prediction of one run (module docstring), ``f(x, args, out)``, ``F(x, args, out)``.
 
-    ``x (n,)``, ``prior (n, n)``, ``step_args (k,)``, ``q (n, n)``, ``angles`` the state's
-    angle indices (int64), ``scratch`` of :func:`predict_scratch`; writes ``new_mean (n,)``,
-    ``new_cov (n, n)``. Returns a status code.
+    ``x (n,)``, ``prior (n, n)``, ``step_args (k,)``, ``q (n, n)``, ``weights`` unused (the
+    arguments of :mod:`localization.compiled.batch`, which the UKF's sigma weights take),
+    ``angles`` the state's angle indices (int64), ``scratch (predict_scratch_length(n, n),)``;
+    writes ``new_mean (n,)``, ``new_cov (n, n)``. Returns a status code.
     """
-    point, jac, temp = scratch
     n = x.shape[0]
+    rows, _ = carve(scratch, 0, 1 + 2 * n, n)
+    point, jac, temp = rows[0], rows[1 : 1 + n], rows[1 + n :]
     point[:] = x
     jac_f(point, step_args, jac)
     point[:] = x
@@ -134,41 +142,29 @@ def predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, scr
     for a in angles:
         new_mean[a] = wrap_angle(new_mean[a])
     _sandwich(jac, prior, temp, new_cov)  # (F P) F^T
-    for i in range(n):
-        for j in range(n):
-            new_cov[i, j] += q[i, j]
-    symmetrise_in_place(new_cov)
-    if not (all_finite(new_mean) and all_finite(new_cov)):
-        return NOT_FINITE
-    return OK
+    return _finish(new_mean, new_cov, q)
 
 
 @numba.njit
 def update_run(
-    h, jac_h, x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, scratch
+    h, jac_h, x, prior, z, step_args, r, weights, state_angles, angles, new_mean, new_cov, scratch
 ) -> int:
     """EKF update of one run in Joseph form (module docstring), ``h(x, args, out)``, ``H(x, args, out)``.
 
-    ``x (n,)``, ``prior (n, n)``, ``z (m,)``, ``step_args (k,)``, ``r (m, m)``,
-    ``state_angles`` and ``angles`` (the measurement's) angle indices (int64), ``scratch`` of
-    :func:`update_scratch`; writes ``new_mean (n,)``, ``new_cov (n, n)``. Returns a status code.
+    ``x (n,)``, ``prior (n, n)``, ``z (m,)``, ``step_args (k,)``, ``r (m, m)``, ``weights``
+    unused (as :func:`predict_run`), ``state_angles`` and ``angles`` (the measurement's) angle
+    indices (int64), ``scratch (update_scratch_length(n, m),)``; writes ``new_mean (n,)``,
+    ``new_cov (n, n)``. Returns a status code.
     """
-    (
-        point,
-        z_pred,
-        innovation,
-        jac,
-        cross,
-        s_cov,
-        s_chol,
-        gain_t,
-        gain,
-        joseph,
-        temp,
-        noise_part,
-        temp_noise,
-    ) = scratch
     n, m = x.shape[0], z.shape[0]
+    rows_n, end = carve(scratch, 0, 1 + 2 * m + 3 * n, n)
+    point, jac, gain_t = rows_n[0], rows_n[1 : 1 + m], rows_n[1 + m : 1 + 2 * m]
+    square = rows_n[1 + 2 * m :]
+    joseph, temp, noise_part = square[:n], square[n : 2 * n], square[2 * n :]
+    rows_m, _ = carve(scratch, end, 2 + 3 * n + 2 * m, m)
+    z_pred, innovation, tall = rows_m[0], rows_m[1], rows_m[2 : 2 + 3 * n]
+    cross, gain, temp_noise = tall[:n], tall[n : 2 * n], tall[2 * n :]
+    s_cov, s_chol = rows_m[2 + 3 * n : 2 + 3 * n + m], rows_m[2 + 3 * n + m :]
     if not all_finite(z):
         return NOT_FINITE
     point[:] = x
@@ -198,76 +194,7 @@ def update_run(
             joseph[i, j] = (1.0 if i == j else 0.0) - total
     _sandwich(joseph, prior, temp, new_cov)  # (A P) A^T
     _sandwich(gain, r, temp_noise, noise_part)  # (K R) K^T
-    for i in range(n):
-        for j in range(n):
-            new_cov[i, j] += noise_part[i, j]
-    symmetrise_in_place(new_cov)
-    if not (all_finite(new_mean) and all_finite(new_cov)):
-        return NOT_FINITE
-    return OK
-
-
-def batched_predict(run):
-    """The compiled EKF prediction of every run of a batch by ``run`` (a call of
-    :func:`predict_run`, ``run(selector, x, P, ...)``): ``core(selector, mean (B, n),
-    cov (B, n, n), args (B or 1, k), q_cov (B or 1, n, n), angles, out_mean (B, n),
-    out_cov (B, n, n))``; returns a status code. A factory for the reason of
-    :func:`localization.compiled.ukf.batched_predict`."""
-
-    @numba.njit
-    def core(selector, mean, cov, args, q_cov, angles, out_mean, out_cov) -> int:
-        runs, n = mean.shape
-        if not all_finite(args):
-            return NOT_FINITE
-        scratch = predict_scratch(n)
-        for b in range(runs):
-            status = run(
-                selector,
-                mean[b],
-                cov[b],
-                args[b if args.shape[0] > 1 else 0],
-                q_cov[b if q_cov.shape[0] > 1 else 0],
-                angles,
-                out_mean[b],
-                out_cov[b],
-                scratch,
-            )
-            if status != OK:
-                return status
-        return OK
-
-    return core
-
-
-def batched_update(run):
-    """As :func:`batched_predict` for an update (``run(x, P, z, ...)`` a call of
-    :func:`update_run`): ``core(mean, cov, z (B, m), args, r_cov (B or 1, m, m), state_angles,
-    angles, out_mean, out_cov)``."""
-
-    @numba.njit
-    def core(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov) -> int:
-        runs, n = mean.shape
-        if not all_finite(args):
-            return NOT_FINITE
-        scratch = update_scratch(n, z.shape[1])
-        for b in range(runs):
-            status = run(
-                mean[b],
-                cov[b],
-                z[b],
-                args[b if args.shape[0] > 1 else 0],
-                r_cov[b if r_cov.shape[0] > 1 else 0],
-                state_angles,
-                angles,
-                out_mean[b],
-                out_cov[b],
-                scratch,
-            )
-            if status != OK:
-                return status
-        return OK
-
-    return core
+    return _finish(new_mean, new_cov, noise_part)
 
 
 # ------------------------------------------------------------------- cached built-in entries
@@ -283,48 +210,54 @@ BUILTIN_PROCESS_KERNELS = (
 )
 
 
+# The kernels are passed by name in each call, as in localization.compiled.ukf.
+
+
 @numba.njit
-def builtin_predict_run(model, x, prior, step_args, q, angles, new_mean, new_cov, s):
+def builtin_predict_run(model, x, prior, step_args, q, weights, angles, new_mean, new_cov, s):
     """:func:`predict_run` with the kernels number ``model`` of :data:`BUILTIN_PROCESS_KERNELS`."""
+    run = predict_run
     if model == 0:
         f, jac_f = motion.cv_point, motion.cv_jacobian_point
-        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+        return run(f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, s)
     if model == 1:
         f, jac_f = motion.ctrv_point, motion.ctrv_jacobian_point
-        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+        return run(f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, s)
     if model == 2:
         f, jac_f = motion.ctra_point, motion.ctra_jacobian_point
-        return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+        return run(f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, s)
     f, jac_f = motion.cca_point, motion.cca_jacobian_point
-    return predict_run(f, jac_f, x, prior, step_args, q, angles, new_mean, new_cov, s)
+    return run(f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, s)
 
 
 @numba.njit
 def leading_entries_update_run(
-    x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s
+    x, prior, z, step_args, r, weights, state_angles, angles, new_mean, new_cov, s
 ):
     """:func:`update_run` with the GPS / pose kernels."""
     h, jac_h = motion.leading_entries_point, motion.leading_entries_jacobian_point
     return update_run(
-        h, jac_h, x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s
+        h, jac_h, x, prior, z, step_args, r, weights, state_angles, angles, new_mean, new_cov, s
     )
 
 
-_builtin_predict = batched_predict(builtin_predict_run)
-_leading_entries_update = batched_update(leading_entries_update_run)
+_builtin_predict = batched_predict(builtin_predict_run, predict_scratch_length)
+_leading_entries_update = batched_update(leading_entries_update_run, update_scratch_length)
 
 
 @numba.njit(cache=True)
-def predict_builtin(model, mean, cov, args, q_cov, angles, out_mean, out_cov):
-    """The batched prediction by :func:`builtin_predict_run`."""
-    return _builtin_predict(model, mean, cov, args, q_cov, angles, out_mean, out_cov)
+def predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
+    """The batched prediction by :func:`builtin_predict_run` (``weights`` unused)."""
+    return _builtin_predict(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
 
 
 @numba.njit(cache=True)
-def update_leading_entries(mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov):
+def update_leading_entries(
+    mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+):
     """The batched update by :func:`leading_entries_update_run` (the GPS or pose model)."""
     return _leading_entries_update(
-        mean, cov, z, args, r_cov, state_angles, angles, out_mean, out_cov
+        mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
     )
 
 
@@ -351,12 +284,13 @@ def predict_entry(point, jacobian_point) -> tuple:
     if found is None:
 
         @numba.njit
-        def run(selector, x, prior, step_args, q, angles, new_mean, new_cov, s):
+        def run(selector, x, prior, step_args, q, weights, angles, new_mean, new_cov, s):
+            f, jac_f = point, jacobian_point
             return predict_run(
-                point, jacobian_point, x, prior, step_args, q, angles, new_mean, new_cov, s
+                f, jac_f, x, prior, step_args, q, weights, angles, new_mean, new_cov, s
             )
 
-        entry = batched_predict(run)
+        entry = batched_predict(run, predict_scratch_length)
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -368,15 +302,17 @@ def update_entry(point, jacobian_point):
     if found is None:
 
         @numba.njit
-        def run(x, prior, z, step_args, r, state_angles, angles, new_mean, new_cov, s):
+        def run(x, prior, z, step_args, r, weights, state_angles, angles, new_mean, new_cov, s):
+            h, jac_h = point, jacobian_point
             return update_run(
-                point,
-                jacobian_point,
+                h,
+                jac_h,
                 x,
                 prior,
                 z,
                 step_args,
                 r,
+                weights,
                 state_angles,
                 angles,
                 new_mean,
@@ -384,12 +320,15 @@ def update_entry(point, jacobian_point):
                 s,
             )
 
-        entry = batched_update(run)
+        entry = batched_update(run, update_scratch_length)
         found = UPDATE_ENTRIES[key] = entry
     return found
 
 
 # -------------------------------------------------------------------------- the Python side
+
+#: The sigma weights the EKF entries take and ignore (the arguments they share with the UKF's).
+NO_WEIGHTS = read_only(np.zeros(3))
 
 
 def predict(
@@ -407,7 +346,8 @@ def predict(
     mean_b, cov_b, _, packed, q_cov, outputs = arrays
     key = (model.point, model.jacobian_point)
     entry, number = PREDICT_ENTRIES.get(key) or predict_entry(*key)
-    arguments = (number, mean_b, cov_b, packed, q_cov, angle_array(angle_indices), *outputs)
+    angles = angle_array(angle_indices)
+    arguments = (number, mean_b, cov_b, packed, q_cov, NO_WEIGHTS, angles, *outputs)
     return call_entry(entry, arguments, "EKF", "predict", key, mean.ndim == 2)
 
 
@@ -431,6 +371,7 @@ def update(
         z_b,
         packed,
         r_cov,
+        NO_WEIGHTS,
         angle_array(angle_indices),
         angle_array(model.angle_indices),
         *outputs,

@@ -36,9 +36,17 @@ state and measurement angle indices, then those indices. The work array (float64
 ``(gamma, W_i, c0)`` (zeros for the EKF), the step arguments ``(k,)``, the process noise
 (``Q (n, n)`` additive, its square root ``S (q, q)`` augmented) and ``R (m, m)``, flattened
 (:func:`_constants`); then the state, ``mean (n,)`` and ``cov (n, n)`` (:func:`_state`); then
-the predicted and the updated belief and the scratch of the filter's predict and update
-(:func:`ukf_scratch`, :func:`ekf_scratch`). A step writes the predicted and updated beliefs
-and copies the updated one onto the state only when it succeeded.
+the predicted and the updated belief (``prior_mean, new_mean, prior_cov, new_cov`` as rows of
+one ``(2 + 2n, n)`` block) and the scratch of the filter's predict and update, as long as
+the filter module says (``predict_scratch_length``, ``update_scratch_length``), which its run
+functions carve (the ``views`` of :func:`_filter_step`). A step writes the predicted and
+updated beliefs and copies the updated one onto the state only when it succeeded.
+
+Measurements. The step entries are compiled for one set of argument types only
+(:func:`_sealed`): a ``z`` that is not a writable C-contiguous float64 vector (strided,
+read-only, another dtype, a list) is copied into one by :meth:`LeanUKF.step` rather than
+making numba compile the entry again for it, which would take about a minute; the length of
+``z`` is checked in the compiled step (:data:`WRONG_SIZE`).
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ import numba
 import numpy as np
 
 from localization.compiled import ekf, motion, ukf
+from localization.compiled.batch import carve
 from localization.compiled.glue import NOT_POSITIVE_DEFINITE, OK, pack_args
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
@@ -57,7 +66,9 @@ _MODEL, _AUGMENTED, _N, _M, _K, _Q, _STATE_ANGLES, _MEASUREMENT_ANGLES = range(8
 _HEADER = 8
 #: work array entries before the step arguments: the predict and the update weights
 _WEIGHTS = 6
-_F64 = np.dtype(np.float64)
+#: The status of a step given a ``z`` of another length than ``m`` (the others are
+#: :mod:`localization.compiled.glue`'s).
+WRONG_SIZE = 3
 
 #: State dimension of each built-in process kernel, by its number.
 STATE_DIMENSIONS = {
@@ -72,14 +83,6 @@ STATE_DIMENSIONS = {
 
 
 @numba.njit
-def _take(work, start, rows, cols):
-    """``(work[start:end] as (rows, cols), end)``: one reshape, whose rows and row blocks
-    are then views without one."""
-    end = start + rows * cols
-    return work[start:end].reshape((rows, cols)), end
-
-
-@numba.njit
 def _constants(work, layout):
     """Views of the constants at the head of ``work`` (module docstring): ``(predict weights
     (3,), update weights (3,), args (k,), noise (q, q), R (m, m), state angles, measurement
@@ -89,8 +92,8 @@ def _constants(work, layout):
     state_angles = layout[_HEADER:first]
     measurement_angles = layout[first : first + layout[_MEASUREMENT_ANGLES]]
     args = work[_WEIGHTS : _WEIGHTS + k]
-    noise, start = _take(work, _WEIGHTS + k, q, q)
-    r_cov, start = _take(work, start, m, m)
+    noise, start = carve(work, _WEIGHTS + k, q, q)
+    r_cov, start = carve(work, start, m, m)
     return (
         work[0:3],
         work[3:6],
@@ -111,156 +114,90 @@ def _state(work, start, n):
 
 
 @numba.njit
-def ukf_scratch(work, start, n, m, q):
-    """The UKF's beliefs and scratch from ``start``: ``(prior_mean, prior_cov, new_mean,
-    new_cov, predict scratch, update scratch, end)``, the scratch shaped as
-    :func:`localization.compiled.ukf.predict_scratch` and ``update_scratch``. Vectors are
-    slices, and the matrices of ``n`` columns, then those of ``m``, row blocks of one matrix
-    each: a view costs a step tens of nanoseconds, a reshape more than a slice."""
-    vectors_n, start = _take(work, start, 5, n)
-    prior_mean, new_mean, point, y0, shift = (
-        vectors_n[0],
-        vectors_n[1],
-        vectors_n[2],
-        vectors_n[3],
-        vectors_n[4],
-    )
-    noise = work[start : start + q]
-    vectors_m, start = _take(work, start + q, 4, m)
-    z0, z_shift, z_pred, innovation = vectors_m[0], vectors_m[1], vectors_m[2], vectors_m[3]
-    dev_rows = 2 * (n + q)
-    columns_n, start = _take(work, start, 3 * n + dev_rows + m, n)
-    prior_cov, new_cov, chol = columns_n[:n], columns_n[n : 2 * n], columns_n[2 * n : 3 * n]
-    dev = columns_n[3 * n : 3 * n + dev_rows]
-    gain_t = columns_n[3 * n + dev_rows :]
-    columns_m, start = _take(work, start, 3 * n + 2 * m, m)
-    z_dev, cross = columns_m[: 2 * n], columns_m[2 * n : 3 * n]
-    s_cov, s_chol = columns_m[3 * n : 3 * n + m], columns_m[3 * n + m :]
-    predict = (chol, point, noise, y0, shift, dev)
-    update = (chol, point, z0, z_shift, z_dev, z_pred, s_cov, s_chol, cross, gain_t, innovation)
-    return prior_mean, prior_cov, new_mean, new_cov, predict, update, start
+def _ukf_predict(model, augmented, *run_args):
+    """The UKF's built-in prediction of one run, additive or augmented noise."""
+    if augmented:
+        return ukf.builtin_augmented_predict_run(model, *run_args)
+    return ukf.builtin_predict_run(model, *run_args)
 
 
 @numba.njit
-def ekf_scratch(work, start, n, m):
-    """As :func:`ukf_scratch` for the EKF, the scratch shaped as
-    :func:`localization.compiled.ekf.predict_scratch` and ``update_scratch``."""
-    vectors_n, start = _take(work, start, 3, n)
-    prior_mean, new_mean, point = vectors_n[0], vectors_n[1], vectors_n[2]
-    vectors_m, start = _take(work, start, 2, m)
-    z_pred, innovation = vectors_m[0], vectors_m[1]
-    columns_n, start = _take(work, start, 6 * n + 2 * m, n)
-    prior_cov, new_cov = columns_n[:n], columns_n[n : 2 * n]
-    jac_f, temp = columns_n[2 * n : 3 * n], columns_n[3 * n : 4 * n]
-    joseph, noise_part = columns_n[4 * n : 5 * n], columns_n[5 * n : 6 * n]
-    jac_h, gain_t = columns_n[6 * n : 6 * n + m], columns_n[6 * n + m :]
-    columns_m, start = _take(work, start, 3 * n + 2 * m, m)
-    cross, gain, temp_noise = columns_m[:n], columns_m[n : 2 * n], columns_m[2 * n : 3 * n]
-    s_cov, s_chol = columns_m[3 * n : 3 * n + m], columns_m[3 * n + m :]
-    update = (
-        point,
-        z_pred,
-        innovation,
-        jac_h,
-        cross,
-        s_cov,
-        s_chol,
-        gain_t,
-        gain,
-        joseph,
-        temp,
-        noise_part,
-        temp_noise,
-    )
-    return prior_mean, prior_cov, new_mean, new_cov, (point, jac_f, temp), update, start
+def _ekf_predict(model, augmented, *run_args):
+    """The EKF's built-in prediction of one run (additive noise: ``augmented`` is 0)."""
+    return ekf.builtin_predict_run(model, *run_args)
+
+
+def _filter_step(predict, update, predict_length, update_length):
+    """``(views, step)``, compiled, of a filter whose one-run prediction is ``predict(model,
+    augmented, *run_args)`` and update ``update(*run_args)`` (the arguments of
+    :mod:`localization.compiled.batch`), their scratch ``predict_length(n, q)`` and
+    ``update_length(n, m)`` floats. ``views(work, layout)``: ``(constants (as
+    :func:`_constants`), (mean, cov), beliefs (2 + 2n, n), (predict scratch, update scratch),
+    end)``; ``step(work, z, layout)``: the step of :func:`ukf_step`. A factory for the reason of
+    :mod:`localization.compiled.batch`."""
+
+    @numba.njit
+    def views(work, layout):
+        n, m, q = layout[_N], layout[_M], layout[_Q]
+        constants = _constants(work, layout)
+        mean, cov, start = _state(work, constants[-1], n)
+        beliefs, start = carve(work, start, 2 + 2 * n, n)
+        middle = start + predict_length(n, q)
+        end = middle + update_length(n, m)
+        return constants[:-1], (mean, cov), beliefs, (work[start:middle], work[middle:end]), end
+
+    @numba.njit
+    def step(work, z, layout) -> int:
+        if z.shape[0] != layout[_M]:
+            return WRONG_SIZE
+        constants, (mean, cov), beliefs, (predict_scratch, update_scratch), _ = views(work, layout)
+        w_predict, w_update, args, noise, r_cov, state_angles, z_angles = constants
+        n = mean.shape[0]
+        prior_mean, new_mean, prior_cov, new_cov = (
+            beliefs[0],
+            beliefs[1],
+            beliefs[2 : 2 + n],
+            beliefs[2 + n :],
+        )
+        predict_args = (mean, cov, args, noise, w_predict, state_angles, prior_mean, prior_cov)
+        status = predict(layout[_MODEL], layout[_AUGMENTED], *predict_args, predict_scratch)
+        if status == OK:
+            update_args = (prior_mean, prior_cov, z, args, r_cov, w_update, state_angles, z_angles)
+            status = update(*update_args, new_mean, new_cov, update_scratch)
+        if status == OK:
+            mean[:] = new_mean
+            cov[:] = new_cov
+        return status
+
+    return views, step
+
+
+ukf_views, _ukf_step = _filter_step(
+    _ukf_predict,
+    ukf.leading_entries_update_run,
+    ukf.predict_scratch_length,
+    ukf.update_scratch_length,
+)
+ekf_views, _ekf_step = _filter_step(
+    _ekf_predict,
+    ekf.leading_entries_update_run,
+    ekf.predict_scratch_length,
+    ekf.update_scratch_length,
+)
 
 
 @numba.njit(cache=True)
 def ukf_step(work, z, layout) -> int:
     """One UKF predict + update of the state held in ``work`` (module docstring; overwritten
-    on success) by ``z (m,)``; returns a status code. Everything the step needs is in ``work``
-    and ``layout``: it allocates nothing."""
-    n, m = layout[_N], layout[_M]
-    w_predict, w_update, args, noise, r_cov, state_angles, z_angles, start = _constants(
-        work, layout
-    )
-    mean, cov, start = _state(work, start, n)
-    prior_mean, prior_cov, new_mean, new_cov, predict, update, _ = ukf_scratch(
-        work, start, n, m, layout[_Q]
-    )
-    if layout[_AUGMENTED]:
-        status = ukf.builtin_augmented_predict_run(
-            layout[_MODEL],
-            mean,
-            cov,
-            args,
-            noise,
-            w_predict,
-            state_angles,
-            prior_mean,
-            prior_cov,
-            predict,
-        )
-    else:
-        status = ukf.builtin_predict_run(
-            layout[_MODEL],
-            mean,
-            cov,
-            args,
-            noise,
-            w_predict,
-            state_angles,
-            prior_mean,
-            prior_cov,
-            predict,
-        )
-    if status == OK:
-        status = ukf.leading_entries_update_run(
-            prior_mean,
-            prior_cov,
-            z,
-            args,
-            r_cov,
-            w_update,
-            state_angles,
-            z_angles,
-            new_mean,
-            new_cov,
-            update,
-        )
-    if status == OK:
-        mean[:] = new_mean
-        cov[:] = new_cov
-    return status
+    on success) by ``z (m,)``; returns a status code (:data:`WRONG_SIZE` for a ``z`` of another
+    length). Everything the step needs is in ``work`` and ``layout``: it allocates nothing."""
+    return _ukf_step(work, z, layout)
 
 
 @numba.njit(cache=True)
 def ekf_step(work, z, layout) -> int:
     """As :func:`ukf_step` for the EKF (additive noise, Joseph-form update)."""
-    n, m = layout[_N], layout[_M]
-    _, _, args, noise, r_cov, state_angles, z_angles, start = _constants(work, layout)
-    mean, cov, start = _state(work, start, n)
-    prior_mean, prior_cov, new_mean, new_cov, predict, update, _ = ekf_scratch(work, start, n, m)
-    status = ekf.builtin_predict_run(
-        layout[_MODEL], mean, cov, args, noise, state_angles, prior_mean, prior_cov, predict
-    )
-    if status == OK:
-        status = ekf.leading_entries_update_run(
-            prior_mean,
-            prior_cov,
-            z,
-            args,
-            r_cov,
-            state_angles,
-            z_angles,
-            new_mean,
-            new_cov,
-            update,
-        )
-    if status == OK:
-        mean[:] = new_mean
-        cov[:] = new_cov
-    return status
+    return _ekf_step(work, z, layout)
 
 
 def _sequence(step):
@@ -301,14 +238,12 @@ def ekf_run(work, zs, layout, means_out, covs_out):
 
 
 def work_length(layout: np.ndarray, unscented: bool) -> int:
-    """The length of a filter's work array (:func:`_constants`, :func:`_state`, then
-    :func:`ukf_scratch` or :func:`ekf_scratch`)."""
+    """The length of a filter's work array (:func:`_constants`, :func:`_state`, the beliefs,
+    the scratch of the filter's predict and update: the ``views`` of :func:`_filter_step`)."""
     n, m, k, q = (int(layout[i]) for i in (_N, _M, _K, _Q))
-    head = _WEIGHTS + k + q * q + m * m + n + n * n
-    if unscented:
-        vectors = 5 * n + q + 4 * m
-        return head + vectors + (3 * n + 2 * (n + q) + m) * n + (3 * n + 2 * m) * m
-    return head + 3 * n + 2 * m + (6 * n + 2 * m) * n + (3 * n + 2 * m) * m
+    lengths = ukf if unscented else ekf
+    head = _WEIGHTS + k + q * q + m * m + n + n * n + (2 + 2 * n) * n
+    return head + lengths.predict_scratch_length(n, q) + lengths.update_scratch_length(n, m)
 
 
 # -------------------------------------------------------------------------- the Python side
@@ -382,6 +317,26 @@ def pack(
     return consts, layout
 
 
+#: The types of the step entries' arguments ``(work, z, layout)``: C-contiguous, writable.
+_STEP_TYPES = (numba.float64[::1], numba.float64[::1], numba.int64[::1])
+
+
+def _sealed(entry):
+    """``entry`` (:func:`ukf_step`, :func:`ekf_step`) compiled, or loaded from numba's disk
+    cache, for :data:`_STEP_TYPES`, and for nothing else: from then on a ``z`` of another
+    type (strided, read-only, another dtype, a list) makes a call raise ``TypeError``, which
+    :meth:`_LeanFilter.step` answers with a copy, instead of numba compiling the entry again
+    for it (about a minute); the step checks no type itself."""
+    if entry not in _SEALED:
+        entry.compile(_STEP_TYPES)
+        entry.disable_compile()
+        _SEALED.add(entry)
+    return entry
+
+
+_SEALED: set = set()
+
+
 class _LeanFilter:
     """The state and the Python side shared by :class:`LeanUKF` and :class:`LeanEKF`."""
 
@@ -402,9 +357,8 @@ class _LeanFilter:
         self._mean[:] = belief.mean
         self._cov[:] = belief.cov
         self._layout = layout
-        self._z_shape = (int(layout[_M]),)
         # the entry as an instance attribute: a step looks up nothing else
-        self._entry = self._step_entry
+        self._entry = _sealed(self._step_entry)
         self.mean = self._mean.view()
         """``(n,)`` the current mean, a read-only view (it changes with every step)."""
         self.mean.flags.writeable = False
@@ -426,7 +380,10 @@ class _LeanFilter:
         """The current belief (a copy)."""
         return Gaussian(self._mean.copy(), self._cov.copy(), self._angles)
 
-    def _failed(self, status: int, step: int | None) -> EstimationError:
+    def _failed(self, status: int, step: int | None, z=None) -> EstimationError:
+        """The error of a failed step (``z`` the measurement of a single step)."""
+        if status == WRONG_SIZE:
+            return self._shape_error(np.shape(z), 1)
         where = "" if step is None else f" at step {step}"
         reason = (
             "a covariance to factorise (P or S) is not positive definite"
@@ -441,11 +398,12 @@ class _LeanFilter:
         Raises:
             EstimationError: ``z`` of another shape, or a failed step (module docstring).
         """
-        if z.__class__ is not np.ndarray or z.dtype is not _F64 or z.shape != self._z_shape:
-            z = self._measurements(z, 1)
-        status = self._entry(self._work, z, self._layout)
+        try:
+            status = self._entry(self._work, z, self._layout)
+        except TypeError:  # not a writable C-contiguous float64 vector: refused (_sealed)
+            status = self._entry(self._work, self._measurements(z, 1), self._layout)
         if status:
-            raise self._failed(status, None)
+            raise self._failed(status, None, z)
 
     def run(self, zs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The steps over ``zs (T, m)`` in one compiled call; returns the updated means
@@ -467,15 +425,18 @@ class _LeanFilter:
         """``values`` as a writable C-contiguous float64 array ``(m,)`` (``ndim`` 1) or
         ``(T, m)`` (``ndim`` 2), or an :class:`EstimationError`."""
         values = np.ascontiguousarray(values, dtype=np.float64)
-        m = self._z_shape[0]
-        if values.ndim != ndim or values.shape[-1] != m:
-            expected = f"({m},)" if ndim == 1 else f"(T, {m})"
-            raise EstimationError(
-                f"{self._owner}: the measurements must have shape {expected}, got {values.shape}"
-            )
+        if values.ndim != ndim or values.shape[-1] != self._layout[_M]:
+            raise self._shape_error(values.shape, ndim)
         if not values.flags.writeable:
             values = values.copy()
         return values
+
+    def _shape_error(self, shape: tuple[int, ...], ndim: int) -> EstimationError:
+        m = int(self._layout[_M])
+        expected = f"({m},)" if ndim == 1 else f"(T, {m})"
+        return EstimationError(
+            f"{self._owner}: the measurements must have shape {expected}, got {shape}"
+        )
 
 
 class LeanUKF(_LeanFilter):

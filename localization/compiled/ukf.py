@@ -36,9 +36,9 @@ arguments packed as floats (:func:`~localization.compiled.glue.pack_args`): each
 flattened, in order. The kernels of the motion models are :mod:`localization.compiled.motion`.
 
 Entries. Each step is written once for one run (:func:`predict_run`,
-:func:`augmented_predict_run`, :func:`update_run`), the kernel and the scratch arrays passed in,
-so that it allocates nothing; :func:`batched_predict` and :func:`batched_update` generate the
-loop over a batch's runs (scratch allocated once per call) around a run function, and the lean
+:func:`augmented_predict_run`, :func:`update_run`), the kernel and the scratch (one float array,
+carved by the run) passed in, so that it allocates nothing; :mod:`localization.compiled.batch` generates the loop over a
+batch's runs (scratch allocated once per call) around a run function, and the lean
 entries of :mod:`localization.compiled.lean` call the run functions on scratch kept in the
 filter. Functions that take a kernel as an argument are only called from other compiled
 functions, so numba inlines the kernel into a specialised copy. The entries Python calls are
@@ -66,8 +66,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numba.extending import register_jitable
 
 from localization.compiled import motion
+from localization.compiled.batch import batched_predict, batched_update, carve
 from localization.compiled.glue import (
     NOT_FINITE,
     NOT_POSITIVE_DEFINITE,
@@ -152,46 +154,35 @@ def _deviations(f, x, chol, gamma, step_args, angles, point, y0, dev) -> None:
             _wrap_row(dev, row, angles)
 
 
-# Each step is written once per run (``*_run``: one belief, its scratch arrays passed in, so
-# that it allocates nothing); the batched cores loop a run function over the runs with the
-# scratch allocated once per call, and the lean entries (:mod:`localization.compiled.lean`)
-# call the run functions on scratch kept in the filter. A run function is called
+# Each step is written once per run (``*_run``: one belief, its scratch passed in as one float
+# array that it carves, so that it allocates nothing); the batched cores
+# (:mod:`localization.compiled.batch`) loop a run function over the runs with the scratch
+# allocated once per call, and the lean entries (:mod:`localization.compiled.lean`) call the
+# run functions on scratch kept in the filter. A prediction's run function is called
 # ``run(selector, x, P, ...)``: ``selector`` is the built-in kernel's number
 # (:data:`BUILTIN_PROCESS_KERNELS`) for the built-in runs, unused for a user's kernel.
 
 
-@numba.njit
-def predict_scratch(n, q):
-    """Scratch of a prediction of ``n`` states with ``q`` noise inputs (``q = n`` additive):
-    ``(chol (n, n), point (n,), noise (q,), y0 (n,), shift (n,), dev (2 (n + q), n))``."""
-    return (
-        np.empty((n, n)),
-        np.empty(n),
-        np.empty(q),
-        np.empty(n),
-        np.empty(n),
-        np.empty((2 * (n + q), n)),
-    )
+@register_jitable
+def predict_scratch_length(n, q):
+    """The floats of a prediction's scratch (:func:`predict_run`, :func:`augmented_predict_run`)
+    of ``n`` states with ``q`` noise inputs (``q = n`` additive)."""
+    return (3 + n + 2 * (n + q)) * n + q
 
 
 @numba.njit
-def update_scratch(n, m):
-    """Scratch of an update of ``n`` states by ``m`` measurements: ``(chol (n, n), point (n,),
-    z0 (m,), shift (m,), dev (2n, m), z_pred (m,), s_cov (m, m), s_chol (m, m), cross (n, m),
-    gain_t (m, n), innovation (m,))``."""
-    return (
-        np.empty((n, n)),
-        np.empty(n),
-        np.empty(m),
-        np.empty(m),
-        np.empty((2 * n, m)),
-        np.empty(m),
-        np.empty((m, m)),
-        np.empty((m, m)),
-        np.empty((n, m)),
-        np.empty((m, n)),
-        np.empty(m),
-    )
+def _predict_views(scratch, n, q):
+    """``scratch (predict_scratch_length(n, q),)`` as ``(chol (n, n), point (n,), noise (q,),
+    y0 (n,), shift (n,), dev (2 (n + q), n))``."""
+    rows, end = carve(scratch, 0, 3 + n + 2 * (n + q), n)
+    return rows[:n], rows[n], scratch[end : end + q], rows[n + 1], rows[n + 2], rows[n + 3 :]
+
+
+@register_jitable
+def update_scratch_length(n, m):
+    """The floats of the scratch of an update (:func:`update_run`) of ``n`` states by ``m``
+    measurements."""
+    return (n + 1 + m) * n + (4 + 3 * n + 2 * m) * m
 
 
 @numba.njit
@@ -199,10 +190,11 @@ def predict_run(f, x, prior, step_args, q_cov, weights, angles, out_mean, out_co
     """Additive-noise prediction of one run (module docstring), ``f(x, args, out)`` per point.
 
     ``x (n,)``, ``prior (n, n)``, ``step_args (k,)``, ``q_cov (n, n)``, ``weights (3,) =
-    (gamma, W_i, c0)``, ``angles`` the state's angle indices (int64), ``scratch`` of
-    :func:`predict_scratch`; writes ``out_mean (n,)``, ``out_cov (n, n)``. Returns a status code.
+    (gamma, W_i, c0)``, ``angles`` the state's angle indices (int64), ``scratch``
+    ``(predict_scratch_length(n, n),)``; writes ``out_mean (n,)``, ``out_cov (n, n)``. Returns a
+    status code.
     """
-    chol, point, _, y0, shift, dev = scratch
+    chol, point, _, y0, shift, dev = _predict_views(scratch, x.shape[0], x.shape[0])
     if not cholesky_lower(prior, chol):
         return NOT_POSITIVE_DEFINITE
     _deviations(f, x, chol, weights[0], step_args, angles, point, y0, dev)
@@ -223,8 +215,8 @@ def augmented_predict_run(
     ``n + q``. The ``2 (n + q)`` sigma points: ``(x +- gamma L_i, 0)`` for the state columns,
     ``(x, +-gamma S_j)`` for the noise columns.
     """
-    chol, point, noise, y0, shift, dev = scratch
     n, q = x.shape[0], root.shape[0]
+    chol, point, noise, y0, shift, dev = _predict_views(scratch, n, q)
     if not cholesky_lower(prior, chol):
         return NOT_POSITIVE_DEFINITE
     gamma = weights[0]
@@ -259,11 +251,16 @@ def update_run(
 
     ``x (n,)``, ``prior (n, n)``, ``z (m,)``, ``step_args (k,)``, ``r_cov (m, m)``,
     ``weights (3,) = (gamma, W_i, c0)``, ``state_angles`` and ``angles`` (the measurement's)
-    angle indices (int64), ``scratch`` of :func:`update_scratch`; writes ``out_mean (n,)``,
+    angle indices (int64), ``scratch (update_scratch_length(n, m),)``; writes ``out_mean (n,)``,
     ``out_cov (n, n)``. Returns a status code.
     """
-    chol, point, z0, shift, dev, z_pred, s_cov, s_chol, cross, gain_t, innovation = scratch
     n, m = x.shape[0], z.shape[0]
+    rows_n, end = carve(scratch, 0, n + 1 + m, n)
+    chol, point, gain_t = rows_n[:n], rows_n[n], rows_n[n + 1 :]
+    rows_m, _ = carve(scratch, end, 4 + 3 * n + 2 * m, m)
+    z0, shift, z_pred, innovation = rows_m[0], rows_m[1], rows_m[2], rows_m[3]
+    dev, cross = rows_m[4 : 4 + 2 * n], rows_m[4 + 2 * n : 4 + 3 * n]
+    s_cov, s_chol = rows_m[4 + 3 * n : 4 + 3 * n + m], rows_m[4 + 3 * n + m :]
     if not all_finite(z):
         return NOT_FINITE
     if not cholesky_lower(prior, chol):
@@ -303,73 +300,6 @@ def update_run(
     return OK
 
 
-def batched_predict(run):
-    """The compiled prediction of every run of a batch by ``run`` (:func:`predict_run`,
-    :func:`augmented_predict_run` or a built-in switch over them, called
-    ``run(selector, x, P, ...)``): ``core(selector, mean (B, n), cov (B, n, n), args (B or 1, k),
-    noise (B or 1, q, q), weights, angles, out_mean (B, n), out_cov (B, n, n))``, ``noise``
-    ``Q`` or its square root with augmented noise; returns a status code (the first run's that
-    is not :data:`OK`). A factory rather than a core taking ``run`` as an argument: numba does
-    not cache an entry that passes a function which itself passes a function (the kernel)."""
-
-    @numba.njit
-    def core(selector, mean, cov, args, noise, weights, angles, out_mean, out_cov) -> int:
-        runs, n = mean.shape
-        if not all_finite(args):
-            return NOT_FINITE
-        scratch = predict_scratch(n, noise.shape[1])
-        for b in range(runs):
-            status = run(
-                selector,
-                mean[b],
-                cov[b],
-                args[b if args.shape[0] > 1 else 0],
-                noise[b if noise.shape[0] > 1 else 0],
-                weights,
-                angles,
-                out_mean[b],
-                out_cov[b],
-                scratch,
-            )
-            if status != OK:
-                return status
-        return OK
-
-    return core
-
-
-def batched_update(run):
-    """As :func:`batched_predict` for an update (``run(x, P, z, ...)`` a call of
-    :func:`update_run`): ``core(mean, cov, z (B, m), args, r_cov (B or 1, m, m), weights,
-    state_angles, angles, out_mean, out_cov)``."""
-
-    @numba.njit
-    def core(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov) -> int:
-        runs, n = mean.shape
-        if not all_finite(args):
-            return NOT_FINITE
-        scratch = update_scratch(n, z.shape[1])
-        for b in range(runs):
-            status = run(
-                mean[b],
-                cov[b],
-                z[b],
-                args[b if args.shape[0] > 1 else 0],
-                r_cov[b if r_cov.shape[0] > 1 else 0],
-                weights,
-                state_angles,
-                angles,
-                out_mean[b],
-                out_cov[b],
-                scratch,
-            )
-            if status != OK:
-                return status
-        return OK
-
-    return core
-
-
 # ------------------------------------------------------------------- cached built-in entries
 # Module-level entries, so numba caches their machine code on disk; one entry holds the
 # four motion models (a closure per model would not be cached). The kernel is named as a
@@ -386,6 +316,11 @@ BUILTIN_PROCESS_KERNELS = (
     (motion.ctra_point, motion.ctra_noisy_point),
     (motion.cca_point, motion.cca_noisy_point),
 )
+
+
+# The kernel is named as a module attribute in each call (above): a kernel passed through
+# ``*args``, or held in a closure and passed on, would make the entry a first-class function
+# call or uncacheable, so the switches spell their calls out.
 
 
 @numba.njit
@@ -434,9 +369,9 @@ def leading_entries_update_run(
     )
 
 
-_builtin_predict = batched_predict(builtin_predict_run)
-_builtin_augmented_predict = batched_predict(builtin_augmented_predict_run)
-_leading_entries_update = batched_update(leading_entries_update_run)
+_builtin_predict = batched_predict(builtin_predict_run, predict_scratch_length)
+_builtin_augmented_predict = batched_predict(builtin_augmented_predict_run, predict_scratch_length)
+_leading_entries_update = batched_update(leading_entries_update_run, update_scratch_length)
 
 
 @numba.njit(cache=True)
@@ -491,7 +426,7 @@ def predict_entry(point, augmented: bool) -> tuple:
         def run(selector, x, prior, step_args, noise, weights, angles, out_mean, out_cov, s):
             return one(point, x, prior, step_args, noise, weights, angles, out_mean, out_cov, s)
 
-        entry = batched_predict(run)
+        entry = batched_predict(run, predict_scratch_length)
         found = PREDICT_ENTRIES[key] = (entry, -1)
     return found
 
@@ -507,7 +442,7 @@ def update_entry(point):
                 point, x, prior, z, step_args, r_cov, weights, state_angles, angles, mean, cov, s
             )
 
-        entry = batched_update(run)
+        entry = batched_update(run, update_scratch_length)
         found = UPDATE_ENTRIES[point] = entry
     return found
 

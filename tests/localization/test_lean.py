@@ -161,8 +161,12 @@ def test_the_lean_filters_refuse_what_they_cannot_run():
     with pytest.raises(EstimationError, match="finite numbers"):
         LeanUKF(UKF, process, measurement, belief, float("nan"))
     lean = LeanUKF(UKF, process, measurement, belief, DT_S)
-    with pytest.raises(EstimationError, match=r"shape \(3,\)"):
-        lean.step(np.zeros(2))
+    with pytest.raises(EstimationError, match=r"shape \(3,\), got \(2,\)"):
+        lean.step(np.zeros(2))  # checked by the compiled step
+    with pytest.raises(EstimationError, match=r"shape \(3,\), got \(4,\)"):
+        lean.step(np.zeros(8)[::2])  # refused by the entry, then checked
+    with pytest.raises(EstimationError, match=r"shape \(3,\), got \(1, 3\)"):
+        lean.step(zs[:1])
     with pytest.raises(EstimationError, match=r"shape \(T, 3\)"):
         lean.run(zs[:, :2])
     lean.step([float(v) for v in zs[0]])  # a list is taken as an array
@@ -178,16 +182,43 @@ def test_the_work_array_is_carved_to_its_last_entry(name, noise):
     filters: list[LeanUKF | LeanEKF] = [LeanUKF(UKF, process, measurement, belief, DT_S)]
     if noise == ProcessNoise.ADDITIVE:
         filters.append(LeanEKF(process, measurement, belief, DT_S))
-    n, m, q = belief.mean.shape[0], measurement.R.shape[0], process.Q.shape[0]
     for lean in filters:
-        work, layout = lean._work, lean._layout
-        start = lean_module._constants(work, layout)[-1]
-        start = lean_module._state(work, start, n)[-1]
-        if isinstance(lean, LeanUKF):
-            end = lean_module.ukf_scratch(work, start, n, m, q)[-1]
-        else:
-            end = lean_module.ekf_scratch(work, start, n, m)[-1]
-        assert end == work.shape[0], type(lean).__name__
+        views = lean_module.ukf_views if isinstance(lean, LeanUKF) else lean_module.ekf_views
+        assert views(lean._work, lean._layout)[-1] == lean._work.shape[0], type(lean).__name__
+
+
+def _refused_measurements(z: np.ndarray) -> dict[str, object]:
+    """``z (3,)`` as the measurements a step entry is not compiled for (``_sealed``)."""
+    wide = np.zeros((3, 2))
+    wide[:, 0] = z
+    read_only = z.copy()
+    read_only.flags.writeable = False
+    return {
+        "strided": wide[:, 0],
+        "read-only": read_only,
+        "float32": z.astype(np.float32),
+        "int64": np.round(z).astype(np.int64),
+        "list": [float(v) for v in z],
+    }
+
+
+def test_a_measurement_of_another_type_is_copied_not_compiled_for():
+    """A step given a strided, read-only, float32 or integer ``z`` (or a list) takes a copy,
+    with the results of a plain ``z``, and numba compiles nothing new: the entries keep the
+    one signature they were sealed with."""
+    process, measurement, belief, zs = _problem("CTRV", ProcessNoise.ADDITIVE)
+    for cls, args in ((LeanUKF, (UKF, process)), (LeanEKF, (process,))):
+        entry = cls._step_entry
+        for name, z in _refused_measurements(zs[0]).items():
+            lean = cls(*args, measurement, belief, DT_S)
+            plain = cls(*args, measurement, belief, DT_S)
+            lean.step(z)
+            plain.step(np.array(z, dtype=np.float64))
+            assert np.array_equal(lean.mean, plain.mean), (cls.__name__, name)
+            assert np.array_equal(lean.cov, plain.cov), (cls.__name__, name)
+        assert len(entry.signatures) == 1, entry.signatures
+        with pytest.raises(TypeError):
+            entry(lean._work, zs[:, 0], lean._layout)  # the entry itself refuses
 
 
 ALLOCATIONS = """
