@@ -462,28 +462,35 @@ def table_markdown(records: list[dict[str, Any]]) -> str:
 
 
 def table_figure(records: list[dict[str, Any]], path: Path) -> None:
-    """Box plots of the position and heading RMSE per estimator, one column per scenario."""
+    """Box plots of the position and heading RMSE per estimator (log scale): one row per
+    plan, its clean run's two panels beside its ``_faults`` variant's."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     scenarios = list(dict.fromkeys(r["scenario"] for r in records))
+    plans = list(dict.fromkeys(s.removesuffix("_faults") for s in scenarios))
+    labels = ("position RMSE (m)", "heading RMSE (rad)")
     fig, axes = plt.subplots(
-        2, len(scenarios), figsize=(4 * len(scenarios), 7), squeeze=False, constrained_layout=True
+        len(plans), 4, figsize=(16, 3.2 * len(plans)), squeeze=False, constrained_layout=True
     )
-    for column, scenario in enumerate(scenarios):
-        mine = [r for r in records if r["scenario"] == scenario]
-        for row, label in enumerate(("position RMSE (m)", "heading RMSE (rad)")):
-            axis = axes[row, column]
-            data = [r["values"][label] for r in mine]
-            axis.boxplot(
-                [d if len(d) else [np.nan] for d in data],
-                tick_labels=[r["estimator"] for r in mine],
-            )
-            axis.set_yscale("log")
-            axis.set_title(f"{scenario}: {label}", fontsize=9)
-            axis.tick_params(axis="x", labelsize=7, rotation=30)
+    for row, plan in enumerate(plans):
+        for pair, scenario in enumerate((plan, f"{plan}_faults")):
+            mine = [r for r in records if r["scenario"] == scenario]
+            for offset, label in enumerate(labels):
+                axis = axes[row, 2 * pair + offset]
+                if not mine:
+                    axis.set_axis_off()
+                    continue
+                data = [r["values"][label] for r in mine]
+                axis.boxplot(
+                    [d if len(d) else [np.nan] for d in data],
+                    tick_labels=[r["estimator"] for r in mine],
+                )
+                axis.set_yscale("log")
+                axis.set_title(f"{scenario}: {label}", fontsize=9)
+                axis.tick_params(axis="x", labelsize=7, rotation=30)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
