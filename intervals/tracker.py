@@ -192,11 +192,10 @@ class TrackerSettings:
     tighten_levels: int = bounded(0, minimum=0, maximum=MAX_LEVELS, integer=True)
     """Bisections below ``eps_m`` of the boxes kept, each piece tested and (with ``contractor``)
     contracted, before any shaving (:mod:`intervals.tighten`): 0 (default) none; 9 (each axis
-    halved about three times) brings the outer volume from 16 to 55 times the consistent poses'
-    volume to 2.0 to 2.6 times (median over the tracking epochs of seven built-in plans;
-    ``office_floor`` 69 to 4.8, its sets too many boxes for the budget at 9 levels;
-    ``benchmarks/tightness.py``), for an epoch 2.6 to 6.8 times as dear and a set of tens to
-    hundreds of boxes instead of a few."""
+    halved about three times) brings the outer volume from 18 to 40 times the consistent poses'
+    volume to 2.1 to 2.6 times (median over the tracking epochs of seven built-in plans;
+    ``office_floor`` 73 to 3.1, and 2.0 at 12 levels; ``benchmarks/tightness.py``), for an
+    epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few."""
 
     whole_boxes: bool = True
     """Keep whole the boxes the scan cannot split (``whole_boxes`` of
