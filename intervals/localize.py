@@ -240,8 +240,9 @@ def _pave(
         axes = None if still is None else still(b)
         probe = None if axes is None else idle.probes(b, axes)
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, probe)
-        if inner and within is not None:  # in no single region: may hold poses outside them
-            verdicts[(verdicts == INSIDE) & ~clip_to_regions(b, within)[1]] = UNDECIDED
+        # an INSIDE box in no single region may hold poses outside them
+        if inner and within is not None and (ins := np.flatnonzero(verdicts == INSIDE)).size:
+            verdicts[ins[~clip_to_regions(b[ins], within)[1]]] = UNDECIDED
         keep = (verdicts == UNDECIDED) & (cut_width(b, scale, axes) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
