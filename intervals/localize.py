@@ -63,8 +63,9 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
     of sensors rejecting each box, and which. ``probe (N, 3, 2)``: boxes within ``boxes`` whose
     sensor verdicts hold for them (:func:`intervals.sonar.idle.probes`; None: ``boxes``); the
-    in-room test always sees ``boxes``."""
-    reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner)
+    in-room test always sees ``boxes``. ``boxes`` are checked pose boxes (:func:`_pose_boxes`,
+    or SIVIA's boxes), not checked again."""
+    reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
     rejects = np.count_nonzero(reject, axis=1)
     out = rejects > q
     inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
@@ -104,7 +105,7 @@ def box_test(boxes, scan: SonarScan, q: int = 0, inner: bool = True) -> np.ndarr
     """SIVIA test ``(N,) int8``: OUTSIDE when the in-room test or more than ``q`` sensors reject
     the box, INSIDE when (``inner``) it is inside the room and at most ``q`` sensors are not
     certainly satisfied, else UNDECIDED."""
-    return _test_and_counts(as_boxes(boxes), scan, q, inner)[0]
+    return _test_and_counts(_pose_boxes(boxes, "box test boxes"), scan, q, inner)[0]
 
 
 def _checked_q(q) -> None:
@@ -147,10 +148,12 @@ def _checked_whole_boxes(whole_boxes) -> bool:
     return whole_boxes
 
 
-def _initial_poses(initial) -> np.ndarray:
-    boxes = as_boxes(initial, "initial pose boxes")
+def _pose_boxes(boxes, name: str) -> np.ndarray:
+    """Checked pose boxes ``(N, 3, 2)`` (:func:`intervals.boxes.as_boxes`, ``name`` in the
+    errors)."""
+    boxes = as_boxes(boxes, name)
     if boxes.shape[1] != 3:
-        raise IntervalError(f"initial pose boxes must be (N, 3, 2), got {boxes.shape}")
+        raise IntervalError(f"{name} must be (N, 3, 2), got {boxes.shape}")
     return boxes
 
 
@@ -237,8 +240,9 @@ def _pave(
         axes = None if still is None else still(b)
         probe = None if axes is None else idle.probes(b, axes)
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, probe)
-        if inner and within is not None:  # in no single region: may hold poses outside them
-            verdicts[(verdicts == INSIDE) & ~clip_to_regions(b, within)[1]] = UNDECIDED
+        # an INSIDE box in no single region may hold poses outside them
+        if inner and within is not None and (ins := np.flatnonzero(verdicts == INSIDE)).size:
+            verdicts[ins[~clip_to_regions(b[ins], within)[1]]] = UNDECIDED
         keep = (verdicts == UNDECIDED) & (cut_width(b, scale, axes) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
@@ -258,7 +262,7 @@ def _pave(
         done = np.concatenate([*held, boxes[:0]])
         if np.array_equal(done, boxes):
             return np.concatenate([*held_counts, np.zeros(0, dtype=np.int64)])
-        return np.count_nonzero(sensor_verdicts(boxes, local, False)[0], axis=1)
+        return np.count_nonzero(sensor_verdicts(boxes, local, False, True)[0], axis=1)
 
     def test(b):
         if within is None:
@@ -283,7 +287,7 @@ def _pave(
 
     def contracted(b):  # the boxes clipped to the regions of ``within``, then by the echoes
         if within is None:
-            return contractor.contract(b, local, q)
+            return contractor.contract(b, local, q, validated=True)
         # clipped: the boxes meeting no region (emptied) and those with an idle axis (kept
         # whole along it, they may reach far out of the regions: big_hall's mean set 3.3 m²
         # against 15 unclipped); any other clipped box leaves SIVIA's grid and the next
@@ -295,7 +299,7 @@ def _pave(
             clip[cut] = still(b[cut]).any(axis=1)
         b = np.where(clip[:, None, None], clipped, b)
         if contract and live.any():
-            b[live] = contractor.contract(b[live], local, q)
+            b[live] = contractor.contract(b[live], local, q, validated=True)
         return b
 
     paving = sivia(
@@ -314,7 +318,7 @@ def _pave(
     if not (paving.coarse or over):
         rejects = np.concatenate(counts) if counts else np.zeros(0, dtype=np.int64)
         if counts and not np.array_equal(np.concatenate(stored), paving.boundary):
-            reject = sensor_verdicts(paving.boundary, local, False)[0]
+            reject = sensor_verdicts(paving.boundary, local, False, True)[0]
             rejects = (
                 recount(paving.boundary, reject) if ray_test else np.count_nonzero(reject, axis=1)
             )
@@ -324,7 +328,7 @@ def _pave(
                 paving.boundary,
                 rejects,
                 counted,
-                (lambda b: contractor.contract(b, local, q)) if contract else None,
+                (lambda b: contractor.contract(b, local, q, validated=True)) if contract else None,
                 scale,
                 tighten_levels,
                 max_boxes=max_boxes,
@@ -431,7 +435,7 @@ def localize(
     """
     _checked_q(q)
     _checked_budget(max_boxes)
-    boxes = _initial_poses(initial)
+    boxes = _pose_boxes(initial, "initial pose boxes")
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
     return _pave(
@@ -525,7 +529,7 @@ def gomne(
     if not (isinstance(q_max, (int, np.integer)) and 0 <= q_max <= scan.belt.count):
         raise IntervalError(f"q_max must be an integer in [0, {scan.belt.count}], got {q_max!r}")
     _checked_budget(max_boxes)
-    boxes = _initial_poses(initial)
+    boxes = _pose_boxes(initial, "initial pose boxes")
     scale = pose_scale(heading_scale_m_per_rad)
     local = scan.restricted_to(boxes)
     widest, rejects, merged, held = _pave(

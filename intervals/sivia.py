@@ -216,8 +216,9 @@ def sivia(
         tested += boxes.shape[0]
         v, scores, idle = _verdicts(test, boxes)
         inner.append(boxes[v == INSIDE])
-        undecided = boxes[v == UNDECIDED]
-        still = None if idle is None else idle[v == UNDECIDED]
+        is_undecided = v == UNDECIDED
+        undecided = boxes[is_undecided]
+        still = None if idle is None else idle[is_undecided]
         small = cut_width(undecided, scale, still) <= eps
         boundary.append(undecided[small])
         wide = undecided[~small]
@@ -225,7 +226,7 @@ def sivia(
             wide_idle = None if still is None else still[~small]
             budget = max_tested is not None
             if budget:  # under a budget, the lowest scores' children first
-                order = np.argsort(scores[v == UNDECIDED][~small], kind="stable")
+                order = np.argsort(scores[is_undecided][~small], kind="stable")
                 wide = wide[order]
                 wide_idle = None if wide_idle is None else wide_idle[order]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))

@@ -72,7 +72,9 @@ def heading_trig(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cos(theta), np.sin(theta)
 
 
-def sensor_verdicts(boxes, scan: SonarScan, inner: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def sensor_verdicts(
+    boxes, scan: SonarScan, inner: bool = True, validated: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Per box and sensor: ``(reject (N, k), certain (N, k))`` bool arrays.
 
     ``reject``: the sensor's reading is inconsistent with every pose of the box (hit test fails
@@ -80,10 +82,13 @@ def sensor_verdicts(boxes, scan: SonarScan, inner: bool = True) -> tuple[np.ndar
     (only computed when ``inner``; else all False). Ignored sensors never reject and are always
     certain (when ``inner``). See the module doc for the tests and their soundness. One call
     of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into` for all boxes.
+    ``validated``: ``boxes`` is already a checked float64 ``(N, 3, 2)`` array
+    (:func:`intervals.boxes.as_boxes`, e.g. a SIVIA frontier), not checked again.
     """
-    boxes = as_boxes(boxes)
-    if boxes.shape[1] != 3:
-        raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
+    if not validated:
+        boxes = as_boxes(boxes)
+        if boxes.shape[1] != 3:
+            raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
     n, k = boxes.shape[0], scan.belt.count
     reject, certain = np.empty((n, k), dtype=bool), np.empty((n, k), dtype=bool)
     belt, boxes = scan.belt, np.ascontiguousarray(boxes)  # one compiled signature: C order

@@ -409,13 +409,19 @@ def contract_into(
             out[n] = work
 
 
-def contract(boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES) -> np.ndarray:
+def contract(
+    boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES, validated: bool = False
+) -> np.ndarray:
     """Pose boxes ``(N, 3, 2)`` contracted by the scan's echoes at relaxation ``q`` (module
     doc): each row lies in the input row and holds every pose of it at which at most ``q``
-    readings are wrong; a row with no such pose is NaN. The heading is left as it is."""
-    boxes = np.ascontiguousarray(as_boxes(boxes), dtype=np.float64)
-    if boxes.shape[1] != 3:
-        raise IntervalError(f"contractor: pose boxes must be (N, 3, 2), got {boxes.shape}")
+    readings are wrong; a row with no such pose is NaN. The heading is left as it is.
+    ``validated``: ``boxes`` is already a checked float64 ``(N, 3, 2)`` array
+    (:func:`intervals.boxes.as_boxes`, e.g. a SIVIA frontier), not checked again."""
+    if not validated:
+        boxes = as_boxes(boxes)
+        if boxes.shape[1] != 3:
+            raise IntervalError(f"contractor: pose boxes must be (N, 3, 2), got {boxes.shape}")
+    boxes = np.ascontiguousarray(boxes)
     if not (isinstance(q, (int, np.integer)) and q >= 0):
         raise IntervalError(f"contractor: q must be a non-negative integer, got {q!r}")
     if not (isinstance(passes, (int, np.integer)) and passes >= 1):

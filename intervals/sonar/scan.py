@@ -139,10 +139,11 @@ class SonarBelt:
         left = self.mount_angle_rad + self.half_aperture_rad
         return (np.cos(right), np.sin(right)), (np.cos(left), np.sin(left))
 
-    @property
+    @cached_property
     def sensor_box_margin_m(self) -> float:
         """Widening of the computed sensor-position boxes: ``SENSOR_BOX_MARGIN`` times (1 m +
-        the largest mount radius), far above their float error (see :mod:`intervals.sonar.geometry`)."""
+        the largest mount radius), far above their float error (see :mod:`intervals.sonar.geometry`);
+        computed once per belt (every test and contractor call reads it)."""
         return SENSOR_BOX_MARGIN * (1.0 + float(np.max(self.mount_polar[0][:, 1])))
 
     @cached_property

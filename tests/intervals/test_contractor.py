@@ -176,6 +176,15 @@ def test_bad_arguments_raise_interval_error():
     with pytest.raises(IntervalError, match="pose boxes"):
         contract(box[:2], scan)
     assert contract(np.zeros((0, 3, 2)), scan).shape == (0, 3, 2)
+    # the box test checks its boxes once, where they enter (its inner calls skip the checks)
+    with pytest.raises(IntervalError, match="box test boxes must be"):
+        box_test(box[:2], scan)
+    with pytest.raises(IntervalError, match="NaN"):
+        box_test(np.full((3, 2), np.nan), scan)
+    boxes = boxes_around(truth, rng, 40)
+    assert np.array_equal(
+        contract(boxes, scan, validated=True), contract(boxes, scan), equal_nan=True
+    )
 
 
 def _disk_test(boxes):
@@ -256,9 +265,9 @@ def test_boxes_outside_every_region_of_within_are_never_contracted(monkeypatch):
     rng = np.random.default_rng(12)
     seen: list[np.ndarray] = []
 
-    def recording(boxes, scan, q=0, passes=2):
+    def recording(boxes, scan, q=0, passes=2, validated=False):
         seen.append(np.array(boxes))
-        return contract(boxes, scan, q, passes)
+        return contract(boxes, scan, q, passes, validated)
 
     monkeypatch.setattr(localize_module.contractor, "contract", recording)
     for case in range(6):

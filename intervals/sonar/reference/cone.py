@@ -104,12 +104,16 @@ def sensor_boxes(boxes: np.ndarray, belt: SonarBelt) -> _SensorBoxes:
     return _SensorBoxes(cx, cy, hx, hy, union, tuple(inter), sure)
 
 
-def sensor_verdicts(boxes, scan: SonarScan, inner: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def sensor_verdicts(
+    boxes, scan: SonarScan, inner: bool = True, validated: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`intervals.sonar.cone.sensor_verdicts` evaluated with numpy: ``(reject (N, k),
-    certain (N, k))``, in blocks of boxes (its arrays grow with boxes x segments x sensors)."""
-    boxes = as_boxes(boxes)
-    if boxes.shape[1] != 3:
-        raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
+    certain (N, k))``, in blocks of boxes (its arrays grow with boxes x segments x sensors);
+    ``validated`` as there."""
+    if not validated:
+        boxes = as_boxes(boxes)
+        if boxes.shape[1] != 3:
+            raise IntervalError(f"sonar test: pose boxes must be (N, 3, 2), got {boxes.shape}")
     block = max(1, BLOCK_ELEMENTS // max(1, scan.segments.shape[0] * scan.belt.count))
     parts = [
         _block_verdicts(boxes[start : start + block], scan, inner)
