@@ -301,8 +301,12 @@ def test_local_cluster_workers_run_one_thread_with_the_pools_environment(monkeyp
 
 def test_a_worker_killed_by_the_system_leaves_its_runs_missing_not_failed(tmp_path):
     """A worker process that dies (the kernel's OOM killer, an operator) is no failure of
-    its runs: the campaign stops with status 1 and a hint, and ``--resume`` runs the rest."""
-    text = CAMPAIGN.replace("count = 2", "count = 3")  # 6 runs
+    its runs: the campaign stops with status 1 and a hint, and ``--resume`` runs the rest.
+    The runs are long enough (30 s simulated, a few tenths of a second each) that the ten
+    runs cannot all end between the first committed row and the kill."""
+    text = CAMPAIGN.replace("count = 2", "count = 5").replace(
+        "duration_s = 5.0", "duration_s = 30.0"
+    )
     path = write(tmp_path, text)
     out = tmp_path / "out"
     command = [sys.executable, "-m", "scenarios.cli", "campaign", str(path), "--out", str(out)]
@@ -326,12 +330,12 @@ def test_a_worker_killed_by_the_system_leaves_its_runs_missing_not_failed(tmp_pa
     assert campaign_process.returncode == 1
     assert "a worker process died" in stderr and "--resume" in stderr
     done = len(list(parts.glob("*.parquet")))
-    assert 1 <= done < 6
+    assert 1 <= done < 10
 
     resumed = subprocess.run([*command, "--resume"], env=env, capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
     table = rows(out / campaign_module.RESULTS_FILE)
-    assert len(table) == 6 and all(r["status"] == "ok" for r in table)
+    assert len(table) == 10 and all(r["status"] == "ok" for r in table)
 
 
 @pytest.mark.slow
