@@ -79,23 +79,6 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     return verdicts, rejects, reject
 
 
-def meets_any(boxes: np.ndarray, regions: np.ndarray) -> np.ndarray:
-    """``(N,)`` bool: the box meets (closed intervals) at least one of ``regions (M, d, 2)``;
-    ``O(N M)`` (:func:`intervals.boxes.meets_any_box`), for a few regions
-    (:data:`MAX_WITHIN_REGIONS`)."""
-    return meets_any_box(boxes, regions)
-
-
-def clip_to_regions(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(clipped (N, d, 2), held (N,) bool)``: each box cut down to the hull of its
-    intersections with ``regions (M, d, 2)`` (closed intervals; a box meeting none becomes an
-    empty row, lower bounds above upper), and whether it lies within one region. Every point
-    of a box that lies in some region stays in its clipped box. ``O(N M)`` time, ``O(N)``
-    memory (:func:`intervals.boxes.clip_to_boxes`), for a few regions
-    (:data:`MAX_WITHIN_REGIONS`)."""
-    return clip_to_boxes(boxes, regions)
-
-
 MAX_WITHIN_REGIONS = 256
 """The most regions ``within`` may hold (:func:`localize`): each test call compares its
 boxes with every region."""
@@ -242,7 +225,7 @@ def _pave(
         verdicts, rejects, reject = _test_and_counts(b, local, q, inner, probe)
         # an INSIDE box in no single region may hold poses outside them
         if inner and within is not None and (ins := np.flatnonzero(verdicts == INSIDE)).size:
-            verdicts[ins[~clip_to_regions(b[ins], within)[1]]] = UNDECIDED
+            verdicts[ins[~clip_to_boxes(b[ins], within)[1]]] = UNDECIDED
         keep = (verdicts == UNDECIDED) & (cut_width(b, scale, axes) <= eps)
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
@@ -267,7 +250,7 @@ def _pave(
     def test(b):
         if within is None:
             return sonar_test(b)
-        meets = meets_any(b, within)
+        meets = meets_any_box(b, within)
         verdicts = np.full(b.shape[0], OUTSIDE, dtype=np.int8)
         rejects = np.full(b.shape[0], local.belt.count + 1, dtype=np.int64)
         axes = None if still is None else np.zeros(b.shape[:2], dtype=bool)
@@ -292,7 +275,7 @@ def _pave(
         # whole along it, they may reach far out of the regions: big_hall's mean set 3.3 m²
         # against 15 unclipped); any other clipped box leaves SIVIA's grid and the next
         # epochs' sets grew (corridor's mean 0.072 to 0.104 m², tracking_epochs.py)
-        clipped, held = clip_to_regions(b, within)
+        clipped, held = clip_to_boxes(b, within)
         live = np.all(clipped[..., 0] <= clipped[..., 1], axis=1)
         clip = ~live
         if still is not None and (cut := live & ~held).any():  # a box in one region: as is

@@ -15,9 +15,9 @@ import pytest
 import shapely
 
 from intervals import localize as localize_module
-from intervals.boxes import volume
+from intervals.boxes import clip_to_boxes, meets_any_box, volume
 from intervals.errors import IntervalError
-from intervals.localize import box_test, clip_to_regions, gomne, localize, meets_any
+from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 from intervals.sonar.contractor import contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
@@ -283,19 +283,19 @@ def test_boxes_outside_every_region_of_within_are_never_contracted(monkeypatch):
         seen.clear()
         found = gomne(scan, prior, 0.05, q_max=1, within=regions)
         assert found.consistent and found.paving.contains(truth[None])[0]
-        assert meets_any(found.paving.outer, regions).all()
+        assert meets_any_box(found.paving.outer, regions).all()
         contracted = np.concatenate(seen)
-        assert meets_any(contracted, regions).all()
+        assert meets_any_box(contracted, regions).all()
         seen.clear()
         gomne(scan, prior, 0.05, q_max=1)
         assert contracted.shape[0] < np.concatenate(seen).shape[0]
 
 
-def test_clip_to_regions_keeps_every_point_in_a_region_and_equals_the_numpy_broadcast():
+def test_clip_to_boxes_keeps_every_point_in_a_region_and_equals_the_numpy_broadcast():
     """The compiled clip against its numpy broadcast (the hull over the regions a box meets of
     the intersections, closed intervals; held: within one region) bit for bit, on random boxes
     and regions with shared bounds and signed zeros; every sampled point of a box lying in
-    some region is in its clipped box, and ``meets_any`` is "the clipped box is not empty"."""
+    some region is in its clipped box, and ``meets_any_box`` is "the clipped box is not empty"."""
     rng = np.random.default_rng(21)
     for trial in range(300):
         n, m = int(rng.integers(0, 60)), int(rng.integers(0, 8))
@@ -304,7 +304,7 @@ def test_clip_to_regions_keeps_every_point_in_a_region_and_equals_the_numpy_broa
         boxes = np.stack([lo, lo + rng.choice([0.0, 0.5, 1.0], (n, 3))], -1)
         r_lo = rng.choice(grid, (m, 3))
         regions = np.stack([r_lo, r_lo + rng.choice([0.0, 0.5, 1.5], (m, 3))], -1)
-        clipped, held = clip_to_regions(boxes, regions)
+        clipped, held = clip_to_boxes(boxes, regions)
         b = boxes[:, None]
         lo_b = np.maximum(b[..., 0], regions[None, :, :, 0])
         hi_b = np.minimum(b[..., 1], regions[None, :, :, 1])
@@ -320,7 +320,7 @@ def test_clip_to_regions_keeps_every_point_in_a_region_and_equals_the_numpy_broa
         assert clipped.tobytes() == expected.tobytes()
         np.testing.assert_array_equal(held, np.any(np.all(within, axis=2), axis=1))
         np.testing.assert_array_equal(
-            meets_any(boxes, regions), np.all(clipped[..., 0] <= clipped[..., 1], axis=1)
+            meets_any_box(boxes, regions), np.all(clipped[..., 0] <= clipped[..., 1], axis=1)
         )
         if n and m:
             t = rng.random((n, 50, 3))
