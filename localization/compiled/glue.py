@@ -19,6 +19,9 @@ from localization.errors import EstimationError
 OK = 0
 NOT_POSITIVE_DEFINITE = 1
 NOT_FINITE = 2
+#: A lean step given a ``z`` of another length than its model's ``m``
+#: (:mod:`localization.compiled.lean`).
+WRONG_SIZE = 3
 
 # A single step's budget is a few microseconds, so the glue below avoids every check it can:
 # noise matrices are read-only C-contiguous float arrays by construction (models.py), beliefs

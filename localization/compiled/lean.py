@@ -46,7 +46,7 @@ Measurements. The step entries are compiled for one set of argument types only
 (:func:`_sealed`): a ``z`` that is not a writable C-contiguous float64 vector (strided,
 read-only, another dtype, a list) is copied into one by :meth:`LeanUKF.step` rather than
 making numba compile the entry again for it, which would take about a minute; the length of
-``z`` is checked in the compiled step (:data:`WRONG_SIZE`).
+``z`` is checked in the compiled step (:data:`localization.compiled.glue.WRONG_SIZE`).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ import numpy as np
 
 from localization.compiled import ekf, motion, ukf
 from localization.compiled.batch import carve
-from localization.compiled.glue import NOT_POSITIVE_DEFINITE, OK, pack_args
+from localization.compiled.glue import NOT_POSITIVE_DEFINITE, OK, WRONG_SIZE, pack_args
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
 from localization.models import MeasurementModel, ProcessModel, ProcessNoise
@@ -66,9 +66,6 @@ _MODEL, _AUGMENTED, _N, _M, _K, _Q, _STATE_ANGLES, _MEASUREMENT_ANGLES = range(8
 _HEADER = 8
 #: work array entries before the step arguments: the predict and the update weights
 _WEIGHTS = 6
-#: The status of a step given a ``z`` of another length than ``m`` (the others are
-#: :mod:`localization.compiled.glue`'s).
-WRONG_SIZE = 3
 
 #: State dimension of each built-in process kernel, by its number.
 STATE_DIMENSIONS = {
