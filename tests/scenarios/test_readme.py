@@ -4,6 +4,7 @@ key tables list every parameter with the default the code really uses."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ from robotsim.sensors.encoders import EncoderParams
 from robotsim.sensors.imu import AccelerometerParams, GyroParams
 from robotsim.sensors.sonar import SonarBeltParams
 from scenarios.runner import run_scenario
-from scenarios.spec import EstimationSpec, RunSpec, parse_scenario
+from scenarios.spec import EstimationSpec, RunSpec, load_scenario, parse_scenario
 
 FORMAT_DOC = Path(__file__).resolve().parents[2] / "docs" / "scenario-format.md"
 
@@ -61,6 +62,24 @@ def test_the_example_parses_and_runs():
     result = run_scenario(spec.with_run(duration_s=10.0))
     assert result.summary["walls"]["contact_samples"] == 0
     assert result.summary["distance_m"] > 2.0
+
+
+def _key_tree(value):
+    """The nested keys of a summary, values dropped (lists of records by their first)."""
+    if isinstance(value, dict):
+        return {key: _key_tree(item) for key, item in value.items()}
+    if isinstance(value, list) and value and isinstance(value[0], dict):
+        return [_key_tree(value[0])]
+    return None
+
+
+def test_the_summary_example_has_the_keys_a_run_writes():
+    text = FORMAT_DOC.read_text(encoding="utf-8")
+    example = json.loads(_block("json", text[text.index("numbers rounded to 4 digits") :]))
+    summary = run_scenario(load_scenario("hall").with_run(duration_s=5.0)).summary
+    written = {key: value for key, value in summary.items() if key not in {"nees", "nis"}}
+    del example["timing"]  # added by the command line, not by run_scenario
+    assert _key_tree(example) == _key_tree(written)
 
 
 ROBOT = RobotParams()
