@@ -811,11 +811,11 @@ def main(args: argparse.Namespace) -> int:
         if value is not None and value < 1:
             raise ScenarioError(None, option, f"must be at least 1, got {value}")
     workers = worker_count(args.workers)
+    campaign = load_campaign(args.campaign)  # a bad file is refused before a cluster starts
     with contextlib.ExitStack() as stack:
         dask = None
         if args.scheduler is not None or args.cluster is not None:
             dask = stack.enter_context(dask_client(args.scheduler, workers))
-        campaign = load_campaign(args.campaign)
         folder = ResultsFolder(args.out or DEFAULT_OUT_DIR / campaign.name)
         folder.prepare(campaign, args.resume)
         finished = run_campaign(

@@ -224,6 +224,24 @@ def test_a_bad_campaign_file_is_refused_with_file_key_and_reason(
     assert not (tmp_path / "out").exists(), "nothing written for a refused campaign"
 
 
+def test_a_bad_campaign_file_is_refused_before_a_cluster_starts(tmp_path):
+    """``--cluster local`` with a bad file: the one-line refusal, and dask never imported
+    (the cluster starts in a thread only once the file is read; a fresh process, since
+    other tests import dask here)."""
+    path = write(tmp_path, CAMPAIGN.replace("count = 2", "count = 0"))
+    probe = (
+        "import sys\n"
+        "from scenarios.cli import main\n"
+        f"status = main(['campaign', {str(path)!r}, '--cluster', 'local', '--workers', '1',"
+        f" '--out', {str(tmp_path / 'out')!r}])\n"
+        "print(status, 'distributed' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    assert done.stdout.split() == [str(EXIT_USER_ERROR), "False"], done.stderr
+    assert done.stderr.strip().startswith(f"robotsim: error: {path}: seeds.count: ")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_folder_that_is_not_empty_is_never_written_into_without_resume(tmp_path, capsys):
     path = write(tmp_path, CAMPAIGN)
     out = tmp_path / "out"
