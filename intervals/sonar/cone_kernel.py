@@ -7,7 +7,10 @@ scene's :mod:`intervals.sonar.segment_grid`, not the whole map), and runs the hi
 test, the free-space test and (optionally) the inner acceptance of the module doc of
 :mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
-sensors leave. It is the same computation as the numpy implementation of
+sensors leave. Work whose result cannot change a verdict is skipped (:func:`_segment_verdicts`,
+:func:`_decided`: distance bounds for flags already set or unused, sensors already decided);
+the verdicts are those of the full evaluation. It is the same computation as the numpy
+implementation of
 :mod:`intervals.sonar.reference.cone` (the reference it is tested against,
 ``tests/intervals/test_sonar_kernel.py``; not on the production path): the same formulas,
 evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
