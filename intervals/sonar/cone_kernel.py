@@ -7,7 +7,10 @@ scene's :mod:`intervals.sonar.segment_grid`, not the whole map), and runs the hi
 test, the free-space test and (optionally) the inner acceptance of the module doc of
 :mod:`intervals.sonar.cone` on every (segment, used sensor) pair, with scalar loops instead of
 numpy's gathered arrays; :func:`room_verdicts_into` runs the in-room test on the boxes the
-sensors leave. It is the same computation as the numpy implementation of
+sensors leave. Work whose result cannot change a verdict is skipped (:func:`_segment_verdicts`,
+:func:`_decided`: distance bounds for flags already set or unused, sensors already decided);
+the verdicts are those of the full evaluation. It is the same computation as the numpy
+implementation of
 :mod:`intervals.sonar.reference.cone` (the reference it is tested against,
 ``tests/intervals/test_sonar_kernel.py``; not on the production path): the same formulas,
 evaluated in the same order of floating-point operations (numba does not contract ``a * b + c``
@@ -43,11 +46,12 @@ IGNORED, ECHO, FREE = 0, 1, 2
 COS_BETA, SIN_BETA, R_LO, R_HI, COS_RIGHT, SIN_RIGHT, COS_LEFT, SIN_LEFT = range(8)
 
 # columns of the per-sensor scratch rows of one box: sensor box, union and intersection
-# half-planes (nx, ny, c) x 2 each
+# half-planes (nx, ny, c) x 2 each, the sensor box's half-diagonal hypot(hx, hy) m
 CX, CY, HX, HY = range(4)
 UNION = 4
 INTER = 10
-SENSOR_COLUMNS = 16
+DIAG = 16
+SENSOR_COLUMNS = 17
 
 
 @numba.njit(cache=True)
@@ -183,6 +187,7 @@ def sensor_rows(
         cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
         hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
         rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
+        rows[i, DIAG] = math.hypot(hx, hy)
         # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
         cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
         cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
@@ -225,7 +230,9 @@ def _segment_verdicts(
     """The hit and free-space tests (and the inner acceptance's parts) of one pose box against
     the segment ``a + t e``, every sensor not ``done``: sets ``hit``, ``fires``, ``close`` and
     ``sure_hit`` ``(k,)`` where this segment makes them true (never resets them), so the
-    verdicts do not depend on the order in which the segments come. Marks ``done`` the sensors
+    verdicts do not depend on the order in which the segments come. The distance bounds of the
+    hit test are computed only while a flag they set can still change a verdict (``hit`` of an
+    echo not yet hit, ``close`` when ``inner`` and not yet close). Marks ``done`` the sensors
     whose verdict no further segment can change (:func:`_decided`); returns how many."""
     k = rows.shape[0]
     decided = 0
@@ -238,21 +245,27 @@ def _segment_verdicts(
             continue
         cx, cy, hx, hy = rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY]
         lo, hi = ranges[i, 0], ranges[i, 1]
-        # hit test: distance bounds between that part and the sensor box
-        p0x, p0y = ax + t0 * ex, ay + t0 * ey
-        dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-        dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
-        dist_ub = (
-            _max(
-                _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
-            )
-            + guard_m
-        )
-        if dist_lb <= hi and dist_ub >= lo:
-            hit[i] = True
-        if dist_lb < lo or (kind[i] == FREE and dist_lb == lo):
-            close[i] = True  # some pose may see this segment closer than lo
+        echo = kind[i] == ECHO
+        # hit test: distance bounds between that part and the sensor box, for the flags that can
+        # still change a verdict: hit (echo readings only), close (``certain`` only)
+        need_hit = echo and not hit[i]
+        need_close = inner and not close[i]
+        if need_hit or need_close:
+            p0x, p0y = ax + t0 * ex, ay + t0 * ey
+            dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
+            dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
+            if need_hit and dist_lb <= hi:
+                dist_ub = (
+                    _max(
+                        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
+                        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
+                    )
+                    + guard_m
+                )
+                if dist_ub >= lo:
+                    hit[i] = True
+            if need_close and (dist_lb < lo or (kind[i] == FREE and dist_lb == lo)):
+                close[i] = True  # some pose may see this segment closer than lo
         # free-space test: segment points in the cone for every pose of the box
         if sure:
             u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
@@ -261,26 +274,28 @@ def _segment_verdicts(
                     _nearest_distance(
                         cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
                     )[2]
-                    + math.hypot(hx, hy)
+                    + rows[i, DIAG]
                     + guard_m
                 )
                 if far_bound < lo:
                     fires[i] = True
                 if far_bound <= hi:
                     sure_hit[i] = True
-        if _decided(hit[i], fires[i], sure, inner):
+        if _decided(echo, hit[i], fires[i], close[i], sure):
             done[i] = True
             decided += 1
     return decided
 
 
 @numba.njit(cache=True)
-def _decided(hit, fires, sure, inner):
-    """Whether a sensor's verdicts are final for the box whatever segments come next: the free
-    space test fired (rejected), or some segment passes the hit test when neither the free
-    space test (``sure`` false: it cannot fire) nor the inner acceptance (``inner`` false) is
-    evaluated (``hit``, ``fires`` and the final formulas only ever turn towards these)."""
-    return fires or (hit and not sure and not inner)
+def _decided(echo, hit, fires, close, sure):
+    """Whether the verdicts of a sensor with an echo (``echo``) or a free-space reading are final
+    for the box whatever segments come next (``hit``, ``fires``, ``close`` and the final
+    formulas of :func:`sensor_verdicts_into` only ever turn towards these): the free-space test
+    fired (rejected); or it cannot fire (``sure`` false, so ``sure_hit`` stays false and an echo
+    is never certain) and an echo passes the hit test (not rejected) or a free-space reading
+    is ``close`` (not certain)."""
+    return fires or (not sure and (hit if echo else close))
 
 
 @numba.njit(cache=True)
@@ -331,6 +346,9 @@ def sensor_verdicts_into(
     close = np.empty(k, dtype=np.bool_)  # some segment may be closer than lo
     sure_hit = np.empty(k, dtype=np.bool_)  # some segment is surely hit within hi
     done = np.empty(k, dtype=np.bool_)  # the sensor's verdicts are final for this box
+    impossible = np.empty(k, dtype=np.bool_)  # an echo interval that is empty: always rejected
+    for i in range(k):
+        impossible[i] = kind[i] == ECHO and ranges[i, 0] > ranges[i, 1]
     visible = reach_m + guard_m
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # box number + 1 of the last visit
@@ -362,11 +380,14 @@ def sensor_verdicts_into(
         fires[:] = False
         close[:] = False
         sure_hit[:] = False
-        # sensors decided before any segment: ignored ones, and free-space readings when the
-        # free-space test cannot fire (their verdict is "not rejected", certain unused)
+        # sensors decided before any segment: ignored ones, impossible echoes (rejected, never
+        # certain), and free-space readings when the free-space test cannot fire (their
+        # verdict is "not rejected", certain unused)
         remaining = 0
         for i in range(k):
-            done[i] = kind[i] == IGNORED or (kind[i] == FREE and not sure and not inner)
+            done[i] = (
+                kind[i] == IGNORED or impossible[i] or (kind[i] == FREE and not sure and not inner)
+            )
             remaining += 0 if done[i] else 1
         # the segments registered near the hull (intervals.sonar.segment_grid: every segment
         # the gap test below keeps is among them), each once (stamped with the box number)
@@ -414,10 +435,9 @@ def sensor_verdicts_into(
                         )
         for i in range(k):
             echo, free = kind[i] == ECHO, kind[i] == FREE
-            impossible = echo and ranges[i, 0] > ranges[i, 1]
-            reject[n, i] = (echo and (not hit[i] or impossible)) or ((echo or free) and fires[i])
+            reject[n, i] = (echo and (not hit[i] or impossible[i])) or ((echo or free) and fires[i])
             certain[n, i] = inner and (
-                (echo and not close[i] and sure_hit[i] and not impossible)
+                (echo and not close[i] and sure_hit[i] and not impossible[i])
                 or (free and not close[i])
                 or kind[i] == IGNORED
             )
