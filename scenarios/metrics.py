@@ -15,7 +15,7 @@ import shapely
 from scipy import special
 
 from robotsim.control import Route
-from robotsim.maps import nearest_segment_distance, point_segment_distance
+from robotsim.maps import nearest_segment_distance
 from robotsim.robot import wrap_angle
 from robotsim.sensors.imu import specific_force
 from scenarios.epochs import STATUS
@@ -305,14 +305,18 @@ def route_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
     path = np.vstack(
         [np.array(spec.start_pose[:2])[None], waypoints, *([waypoints[:1]] if loop else [])]
     )
-    legs = [(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)]
+    legs = np.array([(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)])
     points = log.pose[:, :2]
     to_path = (
-        np.min([point_segment_distance(points, a, b) for a, b in legs], axis=0)
-        if legs
+        nearest_segment_distance(points, legs)
+        if len(legs)
         else np.linalg.norm(points - path[0], axis=1)
     )
-    near = np.linalg.norm(points[:, None, :] - waypoints[None], axis=2) <= WAYPOINT_REACHED_M
+    # (N, W) the distance to each waypoint, sqrt(dx^2 + dy^2) as np.linalg.norm sums it, on
+    # the two coordinate planes (no (N, W, 2) array)
+    dx = points[:, 0, None] - waypoints[None, :, 0]
+    dy = points[:, 1, None] - waypoints[None, :, 1]
+    near = np.sqrt(dx * dx + dy * dy) <= WAYPOINT_REACHED_M
     reached, sample = 0, 0
     while True:  # one pass per waypoint reached: the next in order, after the previous
         target = reached % len(waypoints) if loop else reached

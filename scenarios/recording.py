@@ -85,6 +85,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -929,7 +930,8 @@ def send_series(
                 colors=np.tile(np.asarray(style.color, dtype=np.uint8), (n, 1)),
                 widths=np.full(n, style.width, dtype=np.float32),
                 names=[style.name] * n,
-                interpolation_mode=[style.interpolation] * n,
+                # the uint8 Arrow column rerun would build value by value from n enums
+                interpolation_mode=pa.array(np.full(n, style.interpolation.value, dtype=np.uint8)),
             ),
         ],
     )

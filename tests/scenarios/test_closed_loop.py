@@ -9,6 +9,7 @@ import itertools
 import numpy as np
 import pytest
 
+from robotsim.maps import point_segment_distance
 from robotsim.sensors.sonar import readings_from_draws
 from robotsim.simulation import SensorNoise
 from scenarios.epochs import EpochLog
@@ -157,3 +158,37 @@ def test_route_stats_against_a_direct_computation():
     assert (stats["waypoints_reached"] >= 1) == (first <= WAYPOINT_REACHED_M)
     assert stats["laps"] == stats["waypoints_reached"] // len(waypoints)
     assert stats["goal_reached"] is None  # a looping route has no goal
+
+
+def old_route_figures(spec, log):
+    """The path error (mean, max) and waypoints reached as route_stats computed them before
+    it called nearest_segment_distance: every leg over every sample, the waypoint distances
+    through np.linalg.norm of an (N, W, 2) array."""
+    waypoints, loop = spec.plan.waypoints_m, spec.plan.loop
+    path = np.vstack(
+        [np.array(spec.start_pose[:2])[None], waypoints, *([waypoints[:1]] if loop else [])]
+    )
+    legs = [(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)]
+    points = log.pose[:, :2]
+    to_path = np.min([point_segment_distance(points, a, b) for a, b in legs], axis=0)
+    near = np.linalg.norm(points[:, None, :] - waypoints[None], axis=2) <= WAYPOINT_REACHED_M
+    reached, sample = 0, 0
+    while (target := reached % len(waypoints) if loop else reached) < len(waypoints):
+        later = np.flatnonzero(near[sample:, target])
+        if later.size == 0:
+            break
+        sample += int(later[0]) + 1
+        reached += 1
+    return float(to_path.mean()), float(to_path.max()), reached
+
+
+@pytest.mark.parametrize("name", ["apartment_lived_in", "corridor"])
+@pytest.mark.parametrize("loop", [True, False])
+def test_route_stats_equals_the_per_leg_formula_bit_for_bit(name, loop):
+    spec = closed(name, Follow.TRUTH, seed=3, duration_s=40.0)
+    log = simulate_spec(spec)
+    spec = dataclasses.replace(spec, plan=dataclasses.replace(spec.plan, loop=loop))
+    stats = route_stats(spec, log)
+    mean, worst, reached = old_route_figures(spec, log)
+    assert stats["path_error_m"] == {"mean": mean, "max": worst}
+    assert stats["waypoints_reached"] == reached
