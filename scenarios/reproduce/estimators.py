@@ -53,7 +53,7 @@ import shapely
 
 from localization.fusion import FusionRule
 from robotsim.control import Route
-from robotsim.maps import point_segment_distance
+from robotsim.maps import nearest_segment_distance
 from robotsim.world import WorldParams
 from scenarios import report as report_module
 from scenarios.campaign import Campaign, ResultsFolder, load_campaign, run_campaign
@@ -180,8 +180,8 @@ def kidnap_pose(name: str) -> tuple[float, float, float]:
     sample = free_space_sampler(spec.map, spec.robot.radius_m + KIDNAP_CLEARANCE_M)
     candidates = sample(np.random.default_rng(0), 500)
     path = np.vstack([np.array(spec.start_pose[:2])[None], _waypoints(spec)])
-    legs = [(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)]
-    distance = np.min([point_segment_distance(candidates, a, b) for a, b in legs], axis=0)
+    legs = np.array([(a, b) for a, b in itertools.pairwise(path) if np.any(a != b)])
+    distance = nearest_segment_distance(candidates, legs)
     x, y = candidates[int(np.argmax(distance))]
     return float(x), float(y), 180.0
 
