@@ -36,6 +36,12 @@ from intervals.tracker import (
     Refinement,
     TrackerSettings,
 )
+from localization.compiled.samples import (
+    APPENDED,
+    GYRO_NOT_FINITE,
+    OFF_GRID,
+    append_samples,
+)
 from localization.dead_reckoning import (
     DeadReckoning,
     DeadReckoningHistory,
@@ -203,8 +209,10 @@ class OnlineLocalizer:
         (n,)``, ``accel_m_s2 (n, 2)`` (as :meth:`push_odometry`).
 
         Raises:
-            EstimationError: shapes that disagree, non-integer ticks, or times off the
-                regular grid ``t_0 + k / rate_hz`` (by more than half a period).
+            EstimationError: shapes that disagree, non-integer ticks, times off the regular
+                grid ``t_0 + k / rate_hz`` (by more than half a period, or NaN), a non-finite
+                gyro or accelerometer reading; the message names the first such sample, and
+                none of the block is appended.
         """
         t_s = np.asarray(t_s, dtype=np.float64).reshape(-1)
         ticks, gyro = np.asarray(ticks), np.asarray(gyro_rad_s, dtype=np.float64)
@@ -217,23 +225,37 @@ class OnlineLocalizer:
             )
         if n and ticks.dtype.kind not in "iu":  # np.integer, without the type lookup
             raise EstimationError(f"push_odometry: ticks must be integers, got {ticks.dtype}")
+        ticks = ticks.astype(np.int64, copy=False)  # the buffer's type: one compiled signature
         samples = self._samples
         first = samples.t_s[0] if samples.count else t_s[0] if n else 0.0
-        expected = first + np.arange(samples.count, samples.count + n) * self.settings.dt_s
-        off = np.abs(t_s - expected) > 0.5 * self.settings.dt_s
-        if off.any():
-            k = int(np.argmax(off))
-            raise EstimationError(
-                f"push_odometry: sample {samples.count + k} at t = {t_s[k]!r} s is off the "
-                f"{self.settings.rate_hz:g} Hz grid (expected {expected[k]!r} s)"
-            )
         samples.reserve(samples.count + n)
-        end = samples.count + n
-        samples.t_s[samples.count : end] = t_s
-        samples.ticks[samples.count : end] = ticks
-        samples.gyro[samples.count : end] = gyro
-        samples.accel[samples.count : end] = accel
-        samples.count = end
+        found, k = append_samples(
+            t_s,
+            ticks,
+            gyro,
+            accel,
+            samples.count,
+            first,
+            self.settings.dt_s,
+            samples.t_s,
+            samples.ticks,
+            samples.gyro,
+            samples.accel,
+        )
+        if found != APPENDED:  # the count stays: nothing of the block is appended
+            index = samples.count + k
+            if found == OFF_GRID:
+                expected = first + index * self.settings.dt_s
+                raise EstimationError(
+                    f"push_odometry: sample {index} at t = {t_s[k]!r} s is off the "
+                    f"{self.settings.rate_hz:g} Hz grid (expected {expected!r} s)"
+                )
+            field, value = ("gyro", gyro[k]) if found == GYRO_NOT_FINITE else ("accel", accel[k])
+            raise EstimationError(
+                f"push_odometry: sample {index} at t = {t_s[k]!r} s has a non-finite {field} "
+                f"reading {value}"
+            )
+        samples.count += n
 
     def push_scan(self, t_s: float, readings_m) -> EpochRecord | None:
         """A sonar scan ``readings_m (k,)`` (inf: no echo) taken at ``t_s``, after the odometry

@@ -48,6 +48,7 @@ from robotsim.sensors.sonar import (
     readings_from_draws,
     sonar_draws,
 )
+from robotsim.sensors.stream_kernel import sample_block
 from robotsim.world import World, WorldParams
 
 
@@ -461,7 +462,8 @@ class _SensorStream:
     """The readings of the samples so far from the drawn noise and the states: the
     arithmetic of the vectorised pass of :func:`simulate` on a window of rows, in sample
     order (each row's value is the one the whole-run pass computes: element-wise formulas,
-    the central difference over the row's neighbours, the cumulative turn continued)."""
+    the central difference over the row's neighbours, the cumulative turn continued), one
+    compiled call a block (:func:`robotsim.sensors.stream_kernel.sample_block`)."""
 
     def __init__(
         self,
@@ -481,10 +483,15 @@ class _SensorStream:
         self.rate_hz, self.count, self.schedule = rate_hz, count, schedule
         self.done = 0  # samples handed over so far
         self.t_s = np.arange(count) / rate_hz  # the log's sample times
-        self.turned = np.zeros((1, 2))  # cumulative wheel turns with slip so far, rad
+        self.turned = np.zeros(2)  # cumulative wheel turns with slip so far (left, right), rad
         # the per-sample factors of ticks_from_slip and the counting scale, once per run
         self._slip_factor = 1.0 + sensors.encoders.slip_std * noise.slip  # (N, 2)
         self._ticks_per_rad = robot.ticks_per_rev / (2.0 * np.pi)
+        self._kidnapped = np.zeros(count, dtype=bool)
+        self._kidnapped[list(schedule)] = True
+        # the readings of every sample, written block by block as the samples are handed over
+        self._ticks = np.zeros((count, 2), dtype=np.int64)
+        self._gyro, self._accel = np.zeros(count), np.zeros((count, 2))
         shape = (len(scans), sensors.sonar.count)  # the scans handed over, for the log
         self._true_range, self._readings = np.full(shape, np.nan), np.full(shape, np.nan)
         self._fault = np.zeros(shape, dtype=bool)
@@ -512,23 +519,29 @@ class _SensorStream:
         robot, noise, rate_hz = self.robot, self.noise, self.rate_hz
         low, high = max(start - 1, 0), min(stop + 1, self.count)  # rows for the differences
         window = np.array(states[low:high])
-        rotation = wheel_rotation_increments(window[:, :3], robot)[start - low : stop - low]
-        for j in self.schedule:  # the jump is not odometry: the wheels turned as the robot drove
-            if start <= j < stop:
-                before = window[j - 1 - low, 3:5]
-                rotation[j - start] = (
-                    wheel_rates(before, robot.true_radii_m, robot.wheel_base_m) / rate_hz
-                )
-        turned = rotation * self._slip_factor[start:stop]
-        total = np.cumsum(np.concatenate([self.turned, turned]), axis=0)
-        counted = np.floor(total * self._ticks_per_rad)  # row 0: the count so far
-        ticks = (counted[1:] - counted[:-1]).astype(np.int64)
-        self.turned = total[-1:]
-        velocity = window[:, 3:5]
-        rows = slice(start - low, stop - low)
-        gyro = velocity[rows, 1] + noise.gyro_bias[start:stop] + noise.gyro_white[start:stop]
-        force = specific_force(velocity, rate_hz)[rows]
-        accel = force + noise.accel_bias[start:stop] + noise.accel_white[start:stop]
+        sample_block(
+            window,
+            low,
+            start,
+            stop,
+            self._kidnapped,
+            0.5 * robot.wheel_base_m,
+            robot.true_wheel_radius_left_m,
+            robot.true_wheel_radius_right_m,
+            rate_hz,
+            self._slip_factor,
+            self._ticks_per_rad,
+            self.turned,
+            noise.gyro_bias,
+            noise.gyro_white,
+            noise.accel_bias,
+            noise.accel_white,
+            self._ticks,
+            self._gyro,
+            self._accel,
+        )
+        ticks, gyro = self._ticks[start:stop], self._gyro[start:stop]
+        accel = self._accel[start:stop]
         t_s = self.t_s[start:stop]
         first = end_scan = self._scans_done  # the scans are handed over in order
         samples = self._scan_samples

@@ -11,6 +11,7 @@ module                 holds
 ``lean``               one filter stepped in place, one call a step or a sequence
 ``dead_reckoning``     the dead-reckoning filter over a stretch of samples
 ``mcl``                the Monte Carlo localisation kernels
+``samples``            the localiser's odometry samples checked and appended, a block a call
 =====================  ==================================================================
 
 numba's disk cache keys an entry on its own file only, while the entries inline kernels from

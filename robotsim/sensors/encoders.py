@@ -39,7 +39,7 @@ def wheel_rotation_increments(pose, robot: RobotParams) -> np.ndarray:
     ``pose (N, 3)``; row 0 is zero."""
     pose = np.asarray(pose, dtype=np.float64)
     rotation = np.zeros((len(pose), 2))
-    if len(pose) > 1:  # written into one array: the closed loop calls this on a few rows
+    if len(pose) > 1:
         step = pose[1:] - pose[:-1]
         turn = wrap_angle(step[:, 2])
         heading = pose[:-1, 2] + 0.5 * turn

@@ -138,7 +138,7 @@ def specific_force(velocity, rate_hz: float) -> np.ndarray:
     velocity = np.asarray(velocity, dtype=np.float64)
     v, omega = velocity[:, 0], velocity[:, 1]
     force = np.zeros((len(v), 2))
-    if len(v) > 1:  # np.gradient's arithmetic, written out (the closed loop calls this often)
+    if len(v) > 1:  # np.gradient's arithmetic, written out
         dt_s = 1.0 / rate_hz
         force[1:-1, 0] = (v[2:] - v[:-2]) / (2.0 * dt_s)  # central differences inside
         force[0, 0] = (v[1] - v[0]) / dt_s  # one-sided at the ends
