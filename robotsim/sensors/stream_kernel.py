@@ -35,7 +35,9 @@ _TWO_PI = 2.0 * np.pi
 
 @numba.njit(cache=True)
 def _wrap(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to ``[-pi, pi)``, the operations of :func:`robotsim.robot.wrap_angle`."""
+    """``angle_rad`` wrapped to ``[-pi, pi)``, the operations of :func:`robotsim.robot.wrap_angle`
+    (the estimator's compiled twin, ``localization.compiled.linalg.wrap_angle``, is not
+    imported: the simulator does not depend on the estimator)."""
     wrapped = (angle_rad + np.pi) % _TWO_PI - np.pi
     if wrapped >= np.pi:
         wrapped -= _TWO_PI
