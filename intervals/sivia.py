@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, max_width
+from intervals.boxes import Subpaving, as_boxes, copy_box, max_width
 from intervals.errors import IntervalError
 
 
@@ -159,14 +159,16 @@ def _sorted_level(boxes, verdicts, scale, idle, eps):
     n_inner = n_small = n_wide = 0
     for i in range(n):
         if verdicts[i] == INSIDE:
-            inner[n_inner] = boxes[i]
+            copy_box(boxes, i, inner, n_inner)
             n_inner += 1
         elif verdicts[i] == UNDECIDED:
             if _cut_width_of(boxes, i, scale, idle) <= eps:
-                small[n_small] = boxes[i]
+                copy_box(boxes, i, small, n_small)
                 n_small += 1
             else:
-                wide[n_wide], wide_idle[n_wide], wide_rows[n_wide] = boxes[i], idle[i], i
+                copy_box(boxes, i, wide, n_wide)
+                wide_idle[n_wide, :] = idle[i, :]
+                wide_rows[n_wide] = i
                 n_wide += 1
     return (
         inner[:n_inner].copy(),
@@ -188,7 +190,7 @@ def _by_parent(children, parents, n):
         start[p + 1] += start[p]
     out = np.empty_like(children)
     for k in range(parents.size):
-        out[start[parents[k]]] = children[k]
+        copy_box(children, k, out, start[parents[k]])
         start[parents[k]] += 1
     return out
 
