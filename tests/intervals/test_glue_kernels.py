@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from intervals import boxes as bx
+from intervals import localize as lz
 from intervals import sivia as sv
 from intervals.tracker import covered_volume
 
@@ -228,3 +229,20 @@ def test_sorted_level_and_by_parent_equal_the_numpy_masks(n):
     parents = rng.integers(0, max(n, 1), size=3 * n)
     children = _grid_boxes(rng, 3 * n, 3)
     _same(sv._by_parent(children, parents, n), children[np.argsort(parents, kind="stable")])
+
+
+@pytest.mark.parametrize("n", [0, 1, 9, 400])
+def test_sensor_counts_and_codes_equal_the_numpy_formulas(n):
+    """The box test's counts and verdicts from the sensor verdicts (:mod:`intervals.localize`)."""
+    rng = np.random.default_rng(50 + n)
+    reject, certain = rng.random((n, 16)) < 0.15, rng.random((n, 16)) < 0.8
+    for q, inner in itertools.product((0, 1, 3), (False, True)):
+        rejects, out, inside = lz._sensor_counts(reject, certain, q, inner)
+        np.testing.assert_array_equal(rejects, np.count_nonzero(reject, axis=1))
+        np.testing.assert_array_equal(out, np.count_nonzero(reject, axis=1) > q)
+        unsure = np.count_nonzero(~certain, axis=1) <= q
+        np.testing.assert_array_equal(inside, unsure if inner else np.zeros(n, bool))
+        codes = lz._verdict_codes(out, inside)
+        expected = np.where(out, sv.OUTSIDE, np.where(inside, sv.INSIDE, sv.UNDECIDED))
+        assert codes.dtype == np.int8
+        np.testing.assert_array_equal(codes, expected.astype(np.int8))
