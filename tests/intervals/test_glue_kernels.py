@@ -11,6 +11,7 @@ import pytest
 from intervals import boxes as bx
 from intervals import localize as lz
 from intervals import sivia as sv
+from intervals.sonar.idle import probes
 from intervals.tracker import covered_volume
 
 
@@ -50,25 +51,31 @@ def _oracle_wrap_headings(boxes, axis=2):
     return np.concatenate([out, extra], axis=0)
 
 
-def _oracle_merge_adjacent(boxes, rounds=2):
-    d = boxes.shape[1]
-    for _ in range(rounds):
-        before = boxes.shape[0]
-        for axis in range(d):
-            if boxes.shape[0] < 2:
-                return boxes
-            others = [a for a in range(d) if a != axis]
-            keys = [boxes[:, axis, 0]] + [boxes[:, a, k] for a in others for k in (0, 1)]
-            b = boxes[np.lexsort(keys)]
-            joined = np.all(b[1:, others] == b[:-1, others], axis=(1, 2))
-            joined &= b[1:, axis, 0] == b[:-1, axis, 1]
-            first = np.flatnonzero(np.concatenate([[True], ~joined]))
-            last = np.append(first[1:] - 1, b.shape[0] - 1)
-            boxes = b[first].copy()
-            boxes[:, axis, 1] = b[last, axis, 1]
-        if boxes.shape[0] == before:
-            break
-    return boxes
+def _oracle_merge_pass(boxes, axis):
+    """One pass of the numpy ``merge_adjacent`` along ``axis`` (two boxes or more)."""
+    others = [a for a in range(boxes.shape[1]) if a != axis]
+    keys = [boxes[:, axis, 0]] + [boxes[:, a, k] for a in others for k in (0, 1)]
+    b = boxes[np.lexsort(keys)]
+    joined = np.all(b[1:, others] == b[:-1, others], axis=(1, 2))
+    joined &= b[1:, axis, 0] == b[:-1, axis, 1]
+    first = np.flatnonzero(np.concatenate([[True], ~joined]))
+    last = np.append(first[1:] - 1, b.shape[0] - 1)
+    out = b[first].copy()
+    out[:, axis, 1] = b[last, axis, 1]
+    return out
+
+
+def _oracle_merge_adjacent(boxes, rounds):
+    """``rounds`` rounds of passes over the axes, the last one a round that merged nothing;
+    fewer than two boxes are left as they are."""
+    if rounds == 0 or boxes.shape[0] < 2:
+        return boxes
+    merged = boxes
+    for axis in range(boxes.shape[1]):
+        merged = _oracle_merge_pass(merged, axis) if merged.shape[0] > 1 else merged
+    return (
+        merged if merged.shape[0] == boxes.shape[0] else _oracle_merge_adjacent(merged, rounds - 1)
+    )
 
 
 def _oracle_covered_volume(boxes, cells):
@@ -113,6 +120,8 @@ def _pose_boxes(rng, n):
     at_pi = rng.random(n) < 0.1
     boxes[at_pi, 2] = rng.choice([-np.pi, np.pi]), np.pi
     boxes[at_pi, 2, 0] = np.minimum(boxes[at_pi, 2, 0], np.pi)
+    at_bound = rng.random(n) < 0.1  # reaching exactly the wrapped bound above pi: not split
+    boxes[at_bound, 2] = 3.0, _oracle_nudge(np.pi, 1)
     return boxes
 
 
@@ -156,6 +165,8 @@ def test_merge_adjacent_equals_the_numpy_formula(d):
     for boxes, rounds in itertools.product(cases, (1, 2, 3)):
         merged = bx.merge_adjacent(boxes, rounds)
         _same(merged, _oracle_merge_adjacent(boxes, rounds))
+    for boxes, axis in itertools.product(cases[1:], range(d)):  # the compiled pass alone
+        _same(bx._merge_along(np.ascontiguousarray(boxes), axis), _oracle_merge_pass(boxes, axis))
     grid = cases[-1] if d == 3 else cases[4]
     assert bx.merge_adjacent(grid).shape[0] < grid.shape[0]  # the cases do merge
 
@@ -246,3 +257,13 @@ def test_sensor_counts_and_codes_equal_the_numpy_formulas(n):
         expected = np.where(out, sv.OUTSIDE, np.where(inside, sv.INSIDE, sv.UNDECIDED))
         assert codes.dtype == np.int8
         np.testing.assert_array_equal(codes, expected.astype(np.int8))
+
+
+@pytest.mark.parametrize("n", [0, 1, 9, 400])
+def test_probes_equal_the_numpy_formula(n):
+    """Idle intervals collapsed to their midpoints (:func:`intervals.sonar.idle.probes`)."""
+    rng = np.random.default_rng(60 + n)
+    boxes = np.concatenate([_grid_boxes(rng, n, 3), _pose_boxes(rng, n)])
+    idle = rng.random((2 * n, 3)) < 0.4
+    mid = boxes[..., 0] + (boxes[..., 1] - boxes[..., 0]) / 2.0
+    _same(probes(boxes, idle), np.where(idle[..., None], mid[..., None], boxes))
