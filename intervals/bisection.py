@@ -18,15 +18,17 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from intervals.boxes import copy_box
+
 
 @numba.njit(cache=True)
-def _widest(box, scale, idle):
-    """The first axis of largest scaled width of ``box (d, 2)`` among those not ``idle (d,)``
-    (0 if every axis is idle)."""
+def _widest(boxes, i, scale, idle, owner):
+    """The first axis of largest scaled width of row ``i`` of ``boxes (N, d, 2)`` among those
+    not idle in row ``owner`` of ``idle (M, d)`` (0 if every axis is idle)."""
     axis, best = 0, -1.0
-    for a in range(box.shape[0]):
-        w = (box[a, 1] - box[a, 0]) * scale[a]
-        if not idle[a] and w > best:
+    for a in range(boxes.shape[1]):
+        w = (boxes[i, a, 1] - boxes[i, a, 0]) * scale[a]
+        if not idle[owner, a] and w > best:
             axis, best = a, w
     return axis
 
@@ -49,12 +51,11 @@ def split_rounds(boxes, eps, scale, times, idle):
         wide = 0
         for side in range(2):  # the left children, then the right ones
             for i in range(m):
-                box_idle = idle[owners[i]]
-                axis = _widest(todo[i], scale, box_idle)
+                owner = owners[i]
+                axis = _widest(todo, i, scale, idle, owner)
                 lo, hi = todo[i, axis, 0], todo[i, axis, 1]
                 cut = lo + (hi - lo) / 2.0
-                target = out[count]  # written here, kept if narrow
-                narrow = True
+                narrow = True  # the child written at out[count], kept there if narrow
                 for a in range(d):
                     c_lo, c_hi = todo[i, a, 0], todo[i, a, 1]
                     if a == axis:
@@ -62,19 +63,19 @@ def split_rounds(boxes, eps, scale, times, idle):
                             c_hi = cut
                         else:
                             c_lo = cut
-                    if not box_idle[a] and (c_hi - c_lo) * scale[a] > eps:
+                    if not idle[owner, a] and (c_hi - c_lo) * scale[a] > eps:
                         narrow = False
-                    target[a, 0], target[a, 1] = c_lo, c_hi
+                    out[count, a, 0], out[count, a, 1] = c_lo, c_hi
                 if narrow:
-                    out_owners[count] = owners[i]
+                    out_owners[count] = owner
                     count += 1
                 else:
-                    children[wide] = target
-                    child_owners[wide] = owners[i]
+                    copy_box(out, count, children, wide)
+                    child_owners[wide] = owner
                     wide += 1
         todo, owners = children[:wide], child_owners[:wide]
     for i in range(todo.shape[0]):
-        out[count] = todo[i]
+        copy_box(todo, i, out, count)
         out_owners[count] = owners[i]
         count += 1
     return out[:count], out_owners[:count]

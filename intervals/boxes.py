@@ -94,7 +94,18 @@ def inflate(boxes: np.ndarray, margin) -> np.ndarray:
     )
 
 
-def _nudge(x, direction: int, ulps: int = 2):
+@numba.njit(cache=True)
+def copy_box(source, i, target, j):
+    """Row ``i`` of ``source (N, d, 2)`` copied into row ``j`` of ``target (M, d, 2)``, bound
+    by bound (in the compiled loops: several times faster than a row assignment, which builds
+    array views)."""
+    for a in range(source.shape[1]):
+        target[j, a, 0], target[j, a, 1] = source[i, a, 0], source[i, a, 1]
+
+
+@numba.njit(cache=True)
+def _nudged(x, direction, ulps):
+    """``x`` (a float or an array) moved ``ulps`` floats towards ``direction * inf``."""
     for _ in range(ulps):
         x = np.nextafter(x, direction * np.inf)
     return x
@@ -107,8 +118,8 @@ def _shift_turns(boxes: np.ndarray, turns: np.ndarray, axis: int) -> np.ndarray:
     out = boxes.copy()
     moved = turns != 0
     shift = turns * (2.0 * np.pi)
-    out[:, axis, 0] = np.where(moved, _nudge(boxes[:, axis, 0] - shift, -1), boxes[:, axis, 0])
-    out[:, axis, 1] = np.where(moved, _nudge(boxes[:, axis, 1] - shift, 1), boxes[:, axis, 1])
+    out[:, axis, 0] = np.where(moved, _nudged(boxes[:, axis, 0] - shift, -1, 2), boxes[:, axis, 0])
+    out[:, axis, 1] = np.where(moved, _nudged(boxes[:, axis, 1] - shift, 1, 2), boxes[:, axis, 1])
     return out
 
 
@@ -122,24 +133,46 @@ def unwrap_headings(
     return _shift_turns(boxes, np.round((centre - reference_rad) / (2.0 * np.pi)), axis)
 
 
+@numba.njit(cache=True)
+def _wrap_into(boxes, axis):
+    """:func:`wrap_headings` of ``boxes (N, d, 2)``: ``(N + K, d, 2)``, the ``K`` boxes split at
+    ``pi`` last, in the order of their rows (the float operations of :func:`_shift_turns` and
+    of the clamps, one box at a time)."""
+    n = boxes.shape[0]
+    turn = 2.0 * np.pi
+    pi_up, pi_down = _nudged(np.pi, 1, 2), _nudged(-np.pi, -1, 2)
+    out = boxes.copy()
+    upper = np.empty(n)  # each box's upper heading once moved, before the clamp
+    crossing = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        lo, hi = boxes[i, axis, 0], boxes[i, axis, 1]
+        full = hi - lo >= turn
+        turns = np.floor((lo + np.pi) / turn)
+        if turns != 0:
+            lo, hi = _nudged(lo - turns * turn, -1, 2), _nudged(hi - turns * turn, 1, 2)
+        upper[i] = hi
+        out[i, axis, 0] = pi_down if full else _larger(lo, pi_down)
+        out[i, axis, 1] = pi_up if full else _smaller(hi, pi_up)
+        crossing[i] = not full and hi > pi_up
+    extra = np.flatnonzero(crossing)
+    result = np.empty((n + extra.size, boxes.shape[1], 2))
+    result[:n] = out
+    for k in range(extra.size):
+        copy_box(out, extra[k], result, n + k)
+        result[n + k, axis, 0] = pi_down
+        result[n + k, axis, 1] = _nudged(upper[extra[k]] - turn, 1, 2)
+    return result
+
+
 def wrap_headings(boxes: np.ndarray, axis: int = 2) -> np.ndarray:
     """The same poses with every heading interval within ``[-pi, pi]`` (outward rounded).
 
     Each box is moved by whole turns so that its lower heading lies in ``[-pi, pi)``; a box
-    then reaching above ``pi`` is split at ``pi`` into two boxes (``[lo, pi]`` and
-    ``[-pi, hi - 2 pi]``); a box at least ``2 pi`` wide becomes ``[-pi, pi]``.
+    then reaching above ``pi`` is split at ``pi`` into two boxes (``[lo, pi]`` in its row, and
+    ``[-pi, hi - 2 pi]`` after every row); a box at least ``2 pi`` wide becomes ``[-pi, pi]``.
+    One compiled pass over the boxes (:func:`_wrap_into`).
     """
-    full = boxes[:, axis, 1] - boxes[:, axis, 0] >= 2.0 * np.pi
-    out = _shift_turns(boxes, np.floor((boxes[:, axis, 0] + np.pi) / (2.0 * np.pi)), axis)
-    pi_up, pi_down = _nudge(np.pi, 1), _nudge(-np.pi, -1)
-    hi = out[:, axis, 1].copy()
-    out[:, axis, 0] = np.where(full, pi_down, np.maximum(out[:, axis, 0], pi_down))
-    out[:, axis, 1] = np.where(full, pi_up, np.minimum(hi, pi_up))
-    crossing = ~full & (hi > pi_up)
-    extra = out[crossing].copy()
-    extra[:, axis, 0] = pi_down
-    extra[:, axis, 1] = _nudge(hi[crossing] - 2.0 * np.pi, 1)
-    return np.concatenate([out, extra], axis=0)
+    return _wrap_into(np.ascontiguousarray(boxes, dtype=np.float64), int(axis))
 
 
 def hull(boxes: np.ndarray) -> np.ndarray:
@@ -439,29 +472,90 @@ def clip_to_boxes(boxes: np.ndarray, regions: np.ndarray) -> tuple[np.ndarray, n
     return np.stack([clipped_lo, clipped_hi], axis=-1), held
 
 
+@numba.njit(cache=True)
+def _before(boxes, i, j, axis):
+    """Row ``i`` of ``boxes (N, d, 2)`` sorts strictly before row ``j`` in
+    :func:`merge_adjacent`'s order: by the bounds of the other axes, the last axis first (its
+    upper bound, then its lower), then by the lower bound on ``axis`` (the order of
+    ``np.lexsort([lo_axis, lo_0, hi_0, lo_1, hi_1, ...])`` over the other axes)."""
+    for a in range(boxes.shape[1] - 1, -1, -1):
+        if a == axis:
+            continue
+        for k in (1, 0):
+            if boxes[i, a, k] != boxes[j, a, k]:
+                return boxes[i, a, k] < boxes[j, a, k]
+    return boxes[i, axis, 0] < boxes[j, axis, 0]
+
+
+@numba.njit(cache=True)
+def _sorted_rows(boxes, axis):
+    """``(N,)`` the rows of ``boxes (N, d, 2)`` in :func:`_before`'s order, ties in row order
+    (a stable bottom-up merge sort, as ``np.lexsort`` is stable: the same permutation)."""
+    n = boxes.shape[0]
+    order, spare = np.arange(n), np.empty(n, dtype=np.int64)
+    run = 1
+    while run < n:
+        for start in range(0, n, 2 * run):
+            middle, end = min(start + run, n), min(start + 2 * run, n)
+            i, j = start, middle
+            for k in range(start, end):
+                if j < end and (i >= middle or _before(boxes, order[j], order[i], axis)):
+                    spare[k] = order[j]
+                    j += 1
+                else:
+                    spare[k] = order[i]
+                    i += 1
+        order, spare = spare, order
+        run *= 2
+    return order
+
+
+@numba.njit(cache=True)
+def _merge_along(boxes, axis):
+    """One pass of :func:`merge_adjacent` along ``axis``: ``boxes (N, d, 2)`` sorted
+    (:func:`_sorted_rows`), each run of rows with equal bounds on the other axes, each
+    starting where the one before ends on ``axis``, joined into its first row."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    order = _sorted_rows(boxes, axis)
+    out = np.empty_like(boxes)
+    count = 0
+    for k in range(n):
+        row = order[k]
+        joined = k > 0
+        if joined:
+            last = count - 1
+            for a in range(d):
+                if a != axis and (
+                    boxes[row, a, 0] != out[last, a, 0] or boxes[row, a, 1] != out[last, a, 1]
+                ):
+                    joined = False
+                    break
+            joined = joined and boxes[row, axis, 0] == out[last, axis, 1]
+        if joined:
+            out[count - 1, axis, 1] = boxes[row, axis, 1]
+        else:
+            copy_box(boxes, row, out, count)
+            count += 1
+    return out[:count].copy()
+
+
 def merge_adjacent(boxes: np.ndarray, rounds: int = 2) -> np.ndarray:
     """The same union in fewer boxes, exactly: along each axis in turn, every run of boxes
     with identical bounds on the other axes, each starting where the one before it ends on
     this axis (``hi == lo``, in floating point), becomes one box from the run's first lower
     bound to its last upper bound; ``rounds`` passes over the axes (fewer when a pass merges
-    nothing). ``O(N log N)`` a pass (a lexicographic sort). Siblings SIVIA kept both of merge
-    back into their parent, so a strip where the set is ambiguous (a corridor, along its
-    axis) is held by a few long boxes instead of a row of ``eps`` cells."""
+    nothing). ``O(N log N)`` a pass (a compiled stable sort by the other axes' bounds, then
+    by lower bound: :func:`_merge_along`); the boxes come out in that order. Siblings SIVIA
+    kept both of merge back into their parent, so a strip where the set is ambiguous (a
+    corridor, along its axis) is held by a few long boxes instead of a row of ``eps``
+    cells."""
     d = boxes.shape[1]
     for _ in range(rounds):
         before = boxes.shape[0]
         for axis in range(d):
             if boxes.shape[0] < 2:
                 return boxes
-            others = [a for a in range(d) if a != axis]
-            keys = [boxes[:, axis, 0]] + [boxes[:, a, k] for a in others for k in (0, 1)]
-            b = boxes[np.lexsort(keys)]  # by the other axes' bounds, then by lower bound
-            joined = np.all(b[1:, others] == b[:-1, others], axis=(1, 2))
-            joined &= b[1:, axis, 0] == b[:-1, axis, 1]
-            first = np.flatnonzero(np.concatenate([[True], ~joined]))
-            last = np.append(first[1:] - 1, b.shape[0] - 1)
-            boxes = b[first].copy()
-            boxes[:, axis, 1] = b[last, axis, 1]
+            boxes = _merge_along(np.ascontiguousarray(boxes, dtype=np.float64), axis)
         if boxes.shape[0] == before:
             break
     return boxes

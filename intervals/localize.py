@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from intervals.boxes import (
@@ -59,6 +60,33 @@ costs about 5 ms an epoch (more than the rest of the epoch): worth it on thin co
 (``ray_test=True``) on wide ones."""
 
 
+@numba.njit(cache=True)
+def _sensor_counts(reject, certain, q, inner):
+    """``(rejects (N,) int64, out (N,) bool, inside (N,) bool)`` from the sensor verdicts
+    ``reject, certain (N, k)``: the number of sensors rejecting each box, more than ``q`` of
+    them, and (with ``inner``, else False) at most ``q`` sensors not certainly satisfied."""
+    n, k = reject.shape
+    rejects = np.zeros(n, dtype=np.int64)
+    out, inside = np.empty(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        unsure = 0
+        for j in range(k):
+            rejects[i] += reject[i, j]
+            unsure += not certain[i, j]
+        out[i] = rejects[i] > q
+        inside[i] = inner and unsure <= q
+    return rejects, out, inside
+
+
+@numba.njit(cache=True)
+def _verdict_codes(out, inside):
+    """``(N,) int8``: OUTSIDE where ``out``, else INSIDE where ``inside``, else UNDECIDED."""
+    verdicts = np.empty(out.size, dtype=np.int8)
+    for i in range(out.size):
+        verdicts[i] = OUTSIDE if out[i] else (INSIDE if inside[i] else UNDECIDED)
+    return verdicts
+
+
 def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
     of sensors rejecting each box, and which. ``probe (N, 3, 2)``: boxes within ``boxes`` whose
@@ -66,17 +94,14 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
     in-room test always sees ``boxes``. ``boxes`` are checked pose boxes (:func:`_pose_boxes`,
     or SIVIA's boxes), not checked again."""
     reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
-    rejects = np.count_nonzero(reject, axis=1)
-    out = rejects > q
-    inside = np.count_nonzero(~certain, axis=1) <= q if inner else np.zeros(out.shape, bool)
+    rejects, out, inside = _sensor_counts(reject, certain, int(q), bool(inner))
     if scan.boundary is not None:
         # the in-room test only matters for the boxes the sensors do not reject
         live = np.flatnonzero(~out)
         room_out, room_in = room_verdicts(boxes[live], scan.boundary)
         out[live] |= room_out
         inside[live] &= room_in
-    verdicts = np.where(out, OUTSIDE, np.where(inside, INSIDE, UNDECIDED)).astype(np.int8)
-    return verdicts, rejects, reject
+    return _verdict_codes(out, inside), rejects, reject
 
 
 MAX_WITHIN_REGIONS = 256

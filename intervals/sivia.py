@@ -12,10 +12,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from enum import IntEnum
 
+import numba
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, max_width, widths
+from intervals.boxes import Subpaving, as_boxes, copy_box, max_width
 from intervals.errors import IntervalError
 
 
@@ -75,20 +76,123 @@ def _verdicts(test: BoxTest, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return v, scores, idle
 
 
+@numba.njit(cache=True)
+def _kept_within(contracted, boxes):
+    """The rows of ``contracted (N, d, 2)`` clamped into the rows of ``boxes (N, d, 2)``
+    (``np.maximum`` of the lower bounds, ``np.minimum`` of the upper), the rows then empty on
+    some axis (a lower bound above the upper, or NaN: it compares false) left out."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    out = np.empty_like(boxes)
+    count = 0
+    for i in range(n):
+        live = True
+        for a in range(d):
+            lo, hi = contracted[i, a, 0], contracted[i, a, 1]
+            lo = lo if lo > boxes[i, a, 0] or np.isnan(lo) else boxes[i, a, 0]
+            hi = hi if hi < boxes[i, a, 1] or np.isnan(hi) else boxes[i, a, 1]
+            out[count, a, 0], out[count, a, 1] = lo, hi
+            live = live and lo <= hi
+        count += live
+    return out[:count].copy()
+
+
 def _contracted(contract: Contractor, boxes: np.ndarray) -> np.ndarray:
     """``boxes`` contracted, the empty rows dropped, every row kept within its input row."""
     c = np.asarray(contract(boxes), dtype=np.float64)
     if c.shape != boxes.shape:
         raise IntervalError(f"SIVIA contractor returned shape {c.shape}, expected {boxes.shape}")
-    c = np.stack([np.maximum(c[..., 0], boxes[..., 0]), np.minimum(c[..., 1], boxes[..., 1])], -1)
-    return c[np.all(c[..., 0] <= c[..., 1], axis=1)]  # NaN compares false: dropped too
+    return _kept_within(np.ascontiguousarray(c), np.ascontiguousarray(boxes, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _cut_width_of(boxes, i, scale, idle):
+    """:func:`cut_width` of row ``i`` of ``boxes (N, d, 2)`` (``idle (N, d)``)."""
+    best = 0.0
+    for a in range(boxes.shape[1]):
+        w = (boxes[i, a, 1] - boxes[i, a, 0]) * scale[a]
+        if not idle[i, a] and w > best:
+            best = w
+    return best
+
+
+@numba.njit(cache=True)
+def _cut_widths(boxes, scale, idle):
+    """:func:`cut_width` of every row of ``boxes (N, d, 2)``."""
+    out = np.empty(boxes.shape[0])
+    for i in range(boxes.shape[0]):
+        out[i] = _cut_width_of(boxes, i, scale, idle)
+    return out
+
+
+def _unit_scale(d: int, scale) -> np.ndarray:
+    """``scale`` as contiguous float64 ``(d,)``, ones when None (a width times 1.0 is the
+    width)."""
+    return np.ones(d) if scale is None else np.ascontiguousarray(scale, dtype=np.float64)
+
+
+def _no_idle(boxes: np.ndarray, idle: np.ndarray | None) -> np.ndarray:
+    """``idle (N, d)`` as contiguous bool, all False when None."""
+    if idle is None:
+        return np.zeros(boxes.shape[:2], dtype=np.bool_)
+    return np.ascontiguousarray(idle, dtype=np.bool_)
 
 
 def cut_width(boxes: np.ndarray, scale=None, idle: np.ndarray | None = None) -> np.ndarray:
     """``(N,)`` the largest scaled width of each box ``(N, d, 2)`` over its axes not ``idle
-    (N, d)`` (all axes when None; 0 for a box idle along every axis)."""
-    w = widths(boxes, scale)
-    return np.max(np.where(idle, 0.0, w), axis=-1) if idle is not None else np.max(w, axis=-1)
+    (N, d)`` (all axes when None; 0 for a box idle along every axis). Compiled
+    (:func:`_cut_widths`): widths are non-negative, so the maximum is that of the numpy
+    formula ``max(where(idle, 0, (hi - lo) * scale))``."""
+    b = np.ascontiguousarray(boxes, dtype=np.float64)
+    return _cut_widths(b, _unit_scale(b.shape[1], scale), _no_idle(b, idle))
+
+
+@numba.njit(cache=True)
+def _sorted_level(boxes, verdicts, scale, idle, eps):
+    """One SIVIA level's sort of ``boxes (N, d, 2)`` by ``verdicts (N,)``: ``(inner, small,
+    wide, wide_idle, wide_rows)``, in row order: the INSIDE boxes; the UNDECIDED ones no wider
+    than ``eps`` (:func:`cut_width`, ``idle (N, d)``); the UNDECIDED wider ones, their idle
+    axes and their rows in ``boxes``."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    inner, small, wide = np.empty_like(boxes), np.empty_like(boxes), np.empty_like(boxes)
+    wide_idle = np.empty((n, d), dtype=np.bool_)
+    wide_rows = np.empty(n, dtype=np.int64)
+    n_inner = n_small = n_wide = 0
+    for i in range(n):
+        if verdicts[i] == INSIDE:
+            copy_box(boxes, i, inner, n_inner)
+            n_inner += 1
+        elif verdicts[i] == UNDECIDED:
+            if _cut_width_of(boxes, i, scale, idle) <= eps:
+                copy_box(boxes, i, small, n_small)
+                n_small += 1
+            else:
+                copy_box(boxes, i, wide, n_wide)
+                wide_idle[n_wide, :] = idle[i, :]
+                wide_rows[n_wide] = i
+                n_wide += 1
+    return (
+        inner[:n_inner].copy(),
+        small[:n_small].copy(),
+        wide[:n_wide].copy(),
+        wide_idle[:n_wide].copy(),
+        wide_rows[:n_wide].copy(),
+    )
+
+
+@numba.njit(cache=True)
+def _by_parent(children, parents, n):
+    """``children (M, d, 2)`` in the order of their ``parents (M,)`` (rows ``0..n-1``), each
+    parent's in their own order: a stable counting sort (``argsort(parents, "stable")``)."""
+    start = np.zeros(n + 1, dtype=np.int64)
+    for p in parents:
+        start[p + 1] += 1
+    for p in range(n):
+        start[p + 1] += start[p]
+    out = np.empty_like(children)
+    for k in range(parents.size):
+        copy_box(children, k, out, start[parents[k]])
+        start[parents[k]] += 1
+    return out
 
 
 def _split(
@@ -101,16 +205,13 @@ def _split(
 ) -> np.ndarray:
     """Bisect ``boxes`` (all wider than ``eps``), then their children still wider, ``times``
     rounds in all, in one compiled call (:func:`intervals.bisection.split_rounds`; ``grouped``:
-    the children in the order of their parents; ``idle (N, d)``: the axes of each box never
-    cut, inherited by its children, None: none)."""
-    unit = np.ones(boxes.shape[1]) if scale is None else scale
-    still = np.zeros(boxes.shape[:2], dtype=bool) if idle is None else np.asarray(idle, bool)
+    the children in the order of their parents, :func:`_by_parent`; ``idle (N, d)``: the axes
+    of each box never cut, inherited by its children, None: none)."""
+    b = np.ascontiguousarray(boxes, dtype=np.float64)
     out, parents = split_rounds(
-        np.ascontiguousarray(boxes), float(eps), unit, int(times), np.ascontiguousarray(still)
+        b, float(eps), _unit_scale(b.shape[1], scale), int(times), _no_idle(b, idle)
     )
-    if grouped:
-        out = out[np.argsort(parents, kind="stable")]
-    return out
+    return _by_parent(out, parents, b.shape[0]) if grouped else out
 
 
 def _extra_splits(boxes: np.ndarray, min_level_boxes: int) -> int:
@@ -215,22 +316,17 @@ def sivia(
             break
         tested += boxes.shape[0]
         v, scores, idle = _verdicts(test, boxes)
-        inner.append(boxes[v == INSIDE])
-        is_undecided = v == UNDECIDED
-        undecided = boxes[is_undecided]
-        still = None if idle is None else idle[is_undecided]
-        small = cut_width(undecided, scale, still) <= eps
-        boundary.append(undecided[small])
-        wide = undecided[~small]
+        unit, still = _unit_scale(d, scale), _no_idle(boxes, idle)
+        kept, small, wide, wide_idle, rows = _sorted_level(boxes, v, unit, still, float(eps))
+        inner.append(kept)
+        boundary.append(small)
         if wide.shape[0]:
-            wide_idle = None if still is None else still[~small]
             budget = max_tested is not None
             if budget:  # under a budget, the lowest scores' children first
-                order = np.argsort(scores[is_undecided][~small], kind="stable")
-                wide = wide[order]
-                wide_idle = None if wide_idle is None else wide_idle[order]
+                order = np.argsort(scores[rows], kind="stable")
+                wide, wide_idle = wide[order], wide_idle[order]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
-            pending.append(_split(wide, eps, scale, splits, grouped=budget, idle=wide_idle))
+            pending.append(_split(wide, eps, unit, splits, grouped=budget, idle=wide_idle))
     empty = np.zeros((0, d, 2))
     return Subpaving(
         inner=np.concatenate(inner, axis=0) if inner else empty,

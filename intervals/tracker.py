@@ -36,6 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
 
+import numba
 import numpy as np
 
 from intervals.boxes import (
@@ -75,29 +76,62 @@ SPREAD_FACTOR = 8.0
 COVER_CELLS = 32
 
 
+@numba.njit(cache=True)
+def _covered_cells(lo, hi, origin, width, cells):
+    """The number of cells, of a grid of ``cells`` per axis over the box ``origin + [0,
+    width]`` (``(d,)`` each), that some box of ``lo, hi (N, d)`` covers once snapped outward
+    to the grid (:func:`covered_volume`). Each box adds its ``2^d`` corners, signed by
+    inclusion-exclusion, to a difference array of ``(cells + 1)^d`` counts (flat, C order);
+    prefix sums along each axis, in place, then give each cell the number of boxes over it.
+    ``O(2^d N + d cells^d)``."""
+    n, d = lo.shape
+    side = cells + 1
+    stride = np.empty(d, dtype=np.int64)
+    size = 1
+    for a in range(d - 1, -1, -1):
+        stride[a] = size
+        size *= side
+    counts = np.zeros(size, dtype=np.int64)
+    first, last = np.empty(d, dtype=np.int64), np.empty(d, dtype=np.int64)
+    for i in range(n):
+        for a in range(d):
+            f = min(max(np.floor((lo[i, a] - origin[a]) / width[a] * cells), 0.0), cells - 1.0)
+            e = min(max(np.ceil((hi[i, a] - origin[a]) / width[a] * cells), 1.0), float(cells))
+            first[a], last[a] = int(f), max(int(e), int(f) + 1)
+        for corner in range(1 << d):
+            index, sign = 0, 1
+            for a in range(d):
+                if corner >> (d - 1 - a) & 1:
+                    index += last[a] * stride[a]
+                    sign = -sign
+                else:
+                    index += first[a] * stride[a]
+            counts[index] += sign
+    for a in range(d):  # prefix sums along axis a: the counts seen as (outer, side, inner)
+        inner = stride[a]
+        for start in range(0, size, side * inner):
+            for index in range(start + inner, start + side * inner):
+                counts[index] += counts[index - inner]
+    # a box adds 1 to the cells from its first to before its last index on every axis, and
+    # last <= cells: the slabs at index ``cells`` hold 0, every positive count is a cell's
+    covered = 0
+    for index in range(size):
+        covered += counts[index] > 0
+    return covered
+
+
 def covered_volume(boxes: np.ndarray, cells: int = COVER_CELLS) -> float:
     """An upper estimate of the volume of the union of ``boxes (N, d, 2)`` that counts
     overlaps once: each box snapped outward to a grid of ``cells`` per axis over their hull,
-    the cells covered by any box counted (box corners added to a difference array, summed
-    along each axis). ``O(N + cells^d)``. The sum of the volumes (:func:`volume`) counts a
-    region held by overlapping boxes (several initial boxes kept whole) once per box."""
+    the cells covered by any box counted (:func:`_covered_cells`, compiled). ``O(N +
+    cells^d)``. The sum of the volumes (:func:`volume`) counts a region held by overlapping
+    boxes (several initial boxes kept whole) once per box."""
     whole = hull(boxes)
     width = whole[:, 1] - whole[:, 0]
     if not np.all(width > 0):
         return volume(boxes)
-    d = boxes.shape[1]
-    first = np.clip(np.floor((boxes[..., 0] - whole[:, 0]) / width * cells), 0, cells - 1)
-    last = np.clip(np.ceil((boxes[..., 1] - whole[:, 0]) / width * cells), 1, cells)
-    ends = (first.astype(np.int64), np.maximum(last, first + 1).astype(np.int64))
-    shape = (cells + 1,) * d
-    counts = np.zeros(int(np.prod(shape)), dtype=np.int64)
-    for corner in np.ndindex(*(2,) * d):  # inclusion-exclusion of the 2^d corners
-        index = np.ravel_multi_index(tuple(ends[c][:, a] for a, c in enumerate(corner)), shape)
-        counts += (-1) ** sum(corner) * np.bincount(index, minlength=counts.size)
-    counts = counts.reshape(shape)
-    for axis in range(d):
-        counts = np.cumsum(counts, axis=axis)
-    covered = np.count_nonzero(counts[(slice(0, cells),) * d] > 0)
+    lo, hi = (np.ascontiguousarray(boxes[..., k], dtype=np.float64) for k in (0, 1))
+    covered = _covered_cells(lo, hi, np.ascontiguousarray(whole[:, 0]), width, int(cells))
     return float(covered * np.prod(width / cells))
 
 

@@ -92,8 +92,23 @@ def idle_axes(boxes: np.ndarray, scan: SonarScan, walls: np.ndarray | None = Non
     return idle
 
 
+@numba.njit(cache=True)
+def _collapsed(boxes, idle):
+    """:func:`probes` of ``boxes (N, d, 2)`` and ``idle (N, d)``: each idle interval
+    ``[lo, hi]`` becomes ``[m, m]``, ``m = lo + (hi - lo) / 2``."""
+    out = boxes.copy()
+    for i in range(boxes.shape[0]):
+        for a in range(boxes.shape[1]):
+            if idle[i, a]:
+                mid = boxes[i, a, 0] + (boxes[i, a, 1] - boxes[i, a, 0]) / 2.0
+                out[i, a, 0], out[i, a, 1] = mid, mid
+    return out
+
+
 def probes(boxes: np.ndarray, idle: np.ndarray) -> np.ndarray:
     """The boxes ``(N, 3, 2)`` with their ``idle (N, 3)`` intervals collapsed to the midpoint
-    (the slices whose sensor verdicts hold for the whole box, module doc)."""
-    mid = boxes[..., 0] + (boxes[..., 1] - boxes[..., 0]) / 2.0
-    return np.where(idle[..., None], mid[..., None], boxes)
+    (the slices whose sensor verdicts hold for the whole box, module doc); compiled
+    (:func:`_collapsed`)."""
+    return _collapsed(
+        np.ascontiguousarray(boxes, dtype=np.float64), np.ascontiguousarray(idle, dtype=np.bool_)
+    )
