@@ -29,8 +29,15 @@ def test_epoch_eps_follows_the_narrowest_extent_of_the_set():
     assert _tracker(32).epoch_eps(_set(blob)) == pytest.approx(20.0 / 32.0)
     assert _tracker(16).epoch_eps(_set(blob)) == pytest.approx(20.0 / 16.0)
     assert _tracker(0).epoch_eps(_set(blob)) == 0.05
-    # a strip 30 m long, 0.3 m wide: its narrow side keeps eps_m (0.3 / 32 < 0.05)
-    assert _tracker(32).epoch_eps(_set([[0.0, 30.0], [1.0, 1.3], [0.0, 0.1]])) == 0.05
+    # an L of two strips 0.4 m wide along two walls: its thickness, about twice the width
+    corner = _set(
+        [[50.0, 59.6], [59.2, 59.6], [0.0, 0.1]], [[59.2, 59.6], [50.0, 59.2], [0.0, 0.1]]
+    )
+    thickness_m = 2.0 * (9.6 * 0.4 + 0.4 * 9.2) / (9.6 + 9.6)
+    assert _tracker(8).epoch_eps(corner) == pytest.approx(thickness_m / 8)
+    assert _tracker(16).epoch_eps(corner) == 0.05
+    # a strip 30 m long, 0.3 m wide: its width, under 8 * 0.05
+    assert _tracker(8).epoch_eps(_set([[0.0, 30.0], [1.0, 1.3], [0.0, 0.1]])) == 0.05
     # two small places far apart: the hull is wide, the area small (2 x 0.25 m²: 0.7 m)
     twins = _set([[1.0, 1.5], [1.0, 1.5], [0.0, 0.1]], [[50.0, 50.5], [50.0, 50.5], [3.0, 3.1]])
     assert _tracker(32).epoch_eps(twins) == 0.05
@@ -53,15 +60,15 @@ def test_eps_cells_is_validated():
         TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5, eps_cells=2.5)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("lost", [False, True])
-def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost):
+@pytest.mark.parametrize(("lost", "cells"), [(False, 8), (True, 8), (False, 32), (True, 32)])
+def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost, cells):
     """From a previous set of 8 x 8 m around a random true pose (in the open, or near a wall
     or a corner), echoes lost at random or free space known: every sampled pose that explains
-    the scan and is reachable lies in the epoch's set with ``eps_cells = 32`` (an epoch eps of
-    0.25 m), which holds no more boxes than the same epoch at ``eps_m`` and at most a little
+    the scan and is reachable lies in the epoch's set with ``eps_cells`` 8 (the default: an epoch
+    eps of 1 m) or 32 (0.25 m), which holds about as few boxes as the same epoch at ``eps_m`` and at most a little
     more area (where the scan shrinks the set, it is paved again at ``eps_m``)."""
-    rng = np.random.default_rng(29 + lost)
-    params, checked = DEFAULT_BELT, 0
+    rng = np.random.default_rng(29 + lost + cells)
+    params, checked, boxes = DEFAULT_BELT, 0, np.zeros(2, dtype=int)
     for case in range(6):
         where = case % 3
         if where == 0:  # in the open
@@ -84,7 +91,7 @@ def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost):
                 [truth[2] - 0.2, truth[2] + 0.2],
             ]
         )
-        coarse = _tracker(32).step(previous, scan, 1.0)
+        coarse = _tracker(cells).step(previous, scan, 1.0)
         fine = _tracker(0).step(previous, scan, 1.0)
         assert coarse.consistent and fine.consistent
         count = 6000
@@ -98,9 +105,10 @@ def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost):
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         assert contains_points(coarse.outer, truth[None]).any()
         checked += int(np.count_nonzero(fits))
-        assert coarse.outer.shape[0] <= fine.outer.shape[0]
+        boxes += (coarse.outer.shape[0], fine.outer.shape[0])
         assert area_xy(coarse.outer) <= 1.5 * area_xy(fine.outer) + 1.0
     assert checked > 2000  # the check saw many consistent poses
+    assert boxes[0] <= 1.25 * boxes[1], boxes  # about as few boxes
 
 
 def _scan_segments() -> np.ndarray:

@@ -364,7 +364,7 @@ def test_estimation_defaults_and_values():
     assert spec.estimation.intervals.tighten_levels == 0  # off by default
     tightened = parse(BASE + "[estimation]\ntighten_levels = 9\n").estimation.intervals
     assert tightened.tighten_levels == 9
-    assert spec.estimation.intervals.eps_cells == 32  # large sets paved at their own scale
+    assert spec.estimation.intervals.eps_cells == 8  # large sets paved at their own scale
     assert parse(BASE + "[estimation]\neps_cells = 0\n").estimation.intervals.eps_cells == 0
     assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
