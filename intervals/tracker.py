@@ -190,6 +190,13 @@ class TrackerSettings:
     """The robot's largest yaw rate, rad/s."""
     eps_m: float = bounded(0.05, minimum=MIN_EPS_M)
     """SIVIA precision: boxes narrower than this (scaled widths) are not bisected, m."""
+    eps_cells: int = bounded(8, minimum=0, maximum=1_000_000, integer=True)
+    """A tracking epoch paves at the precision of the previous set's size over this many
+    cells when that is coarser than ``eps_m`` (:meth:`IntervalTracker.epoch_eps`), so that a
+    set large by nature (big_hall, far from its walls) is held by a bounded number of boxes
+    instead of being paved at ``eps_m`` along its whole boundary: still a sound cover, but
+    looser (on big_hall's 600 s run 37 % more area; BENCHMARKS.md, "Large sets paved at
+    their own scale"). 0: always ``eps_m``."""
     heading_scale_m_per_rad: float = bounded(1.0, above=0.0)
     """Metres per radian when the heading width is compared with position widths."""
     q_max: int = bounded(1, minimum=0, integer=True)
@@ -408,6 +415,30 @@ class IntervalTracker:
             cells = motion(self.groups(boxes, apart), dt_s)
         return wrap_headings(cells)
 
+    def epoch_eps(self, previous: Subpaving) -> float:
+        """The precision of a tracking epoch from ``previous`` (and of its paving again when
+        the scan shrank the set to half that size or less, :meth:`step`), m: ``eps_m``, or
+        the set's size over ``eps_cells`` when that is larger (``eps_cells`` 0: ``eps_m``).
+        The size is the smallest of the widths ``w_x, w_y`` of the set's hull, the square root
+        of its (x, y) area ``A`` and its thickness ``2 A / (w_x + w_y)``, ``A`` taken as the
+        set's volume over its hull's heading width (at most the projected area). A square
+        blob of side ``D`` gives ``D``; a strip its width; an L of two strips along two walls
+        about twice their width; several small places far apart, or scattered pieces over
+        a wide hull, a small fraction of the hull: only a set wide in every direction is
+        paved coarser than ``eps_m``."""
+        s = self.settings
+        if s.eps_cells == 0:
+            return s.eps_m
+        boxes = previous.outer
+        whole = hull(unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0))
+        width = whole[:, 1] - whole[:, 0]
+        span_m = float(width[0] + width[1])
+        if not (width[2] > 0 and span_m > 0):
+            return s.eps_m
+        area_m2 = float(volume(boxes) / width[2])
+        size_m = min(float(width[0]), float(width[1]), np.sqrt(area_m2), 2 * area_m2 / span_m)
+        return max(s.eps_m, size_m / s.eps_cells)
+
     def _hull_prediction(self, previous: Subpaving, dt_s: float) -> np.ndarray:
         """The hull of ``previous`` (headings unwrapped near its first box) grown by the
         limits over ``dt_s``, headings wrapped."""
@@ -422,6 +453,7 @@ class IntervalTracker:
         splits_per_level: int = 3,
         within=None,
         tests_per_box: float = TESTS_PER_BOX,
+        eps_m: float | None = None,
     ):
         """GOMNE on ``initial`` under the budget (``tests_per_box`` tests a box of it), keeping
         up to :data:`KEPT_PER_BOX` ``* max_boxes`` boxes (for a :class:`Refinement`)."""
@@ -429,7 +461,7 @@ class IntervalTracker:
         return gomne(
             scan,
             initial,
-            s.eps_m,
+            s.eps_m if eps_m is None else eps_m,
             s.q_max,
             s.heading_scale_m_per_rad,
             guaranteed=s.guaranteed,
@@ -493,7 +525,16 @@ class IntervalTracker:
             if cheap:
                 floor = min(float(TESTS_PER_BOX), TRACKING_MIN_TESTS / s.max_boxes)
                 tests = max(float(TRACKING_TESTS_PER_BOX), floor)
-            found = self._search(scan, predicted, within=within, tests_per_box=tests)
+            eps_m = self.epoch_eps(previous)
+            found = self._search(scan, predicted, within=within, tests_per_box=tests, eps_m=eps_m)
+            # a scan that shrank the set (walls back in reach) has it paved again at the
+            # precision of its new size, from its own cover: one epoch is not left coarse
+            while found.consistent and eps_m > s.eps_m:
+                finer_m = self.epoch_eps(found.paving)
+                if finer_m > 0.5 * eps_m:
+                    break
+                eps_m = finer_m
+                found = self._search(scan, found.paving.outer, tests_per_box=tests, eps_m=eps_m)
             status = EpochStatus.TRACKING if found.consistent else EpochStatus.INCONSISTENT
         if not found.consistent:
             return EpochResult(None, None, status, time.perf_counter() - start)

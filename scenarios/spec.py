@@ -147,6 +147,7 @@ MCL_PREFIX = "mcl."
 TRACKER_KEYS = (
     "tracker",
     "eps_m",
+    "eps_cells",
     "q_max",
     "guaranteed",
     "heading_scale_m_per_rad",

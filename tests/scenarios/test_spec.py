@@ -270,6 +270,11 @@ BAD = {
         "estimation.tighten_levels",
         "<= 12",
     ),
+    "estimation eps cells": (
+        "[estimation]\neps_cells = -1\n",
+        "estimation.eps_cells",
+        ">= 0",
+    ),
     "estimation typo": ("[estimation]\nqmax = 2\n", "estimation.qmax", "did you mean 'q_max'"),
     "free space with lost echoes": (
         "[sensors.sonar]\nlost_echo_prob = 0.1\n[estimation]\nfree_space = true\n",
@@ -359,6 +364,8 @@ def test_estimation_defaults_and_values():
     assert spec.estimation.intervals.tighten_levels == 0  # off by default
     tightened = parse(BASE + "[estimation]\ntighten_levels = 9\n").estimation.intervals
     assert tightened.tighten_levels == 9
+    assert spec.estimation.intervals.eps_cells == 8  # large sets paved at their own scale
+    assert parse(BASE + "[estimation]\neps_cells = 0\n").estimation.intervals.eps_cells == 0
     assert (tracker.v_max_m_s, tracker.omega_max_rad_s) == (0.6, 1.5)  # the robot's limits
 
 
