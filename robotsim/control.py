@@ -124,8 +124,11 @@ class PurePursuit:
         if self.finished:
             return 0.0, 0.0
         lookahead = self.route.lookahead_m
-        # move on to the next segment once past this one's end or near its end point
-        while not self._is_last(self._segment):
+        # move on to the next segment once past this one's end or near its end point (a loop
+        # at most one lap a command: every waypoint of a loop can lie within the lookahead)
+        for _ in range(len(self._waypoints) + 1):
+            if self._is_last(self._segment):
+                break
             t, _ = _project(self._point(self._segment), self._point(self._segment + 1), x_m, y_m)
             end_x, end_y = self._point(self._segment + 1)
             if t < 1.0 and math.hypot(end_x - x_m, end_y - y_m) > lookahead:
@@ -157,7 +160,9 @@ class PurePursuit:
         start, end = self._point(segment), self._point(segment + 1)
         t, length = _project(start, end, x_m, y_m)
         remaining = lookahead + min(max(t, 0.0), 1.0) * length
-        while remaining > length and not self._is_last(segment):
+        for _ in range(len(self._waypoints) + 1):  # at most one lap (a loop of zero length)
+            if remaining <= length or self._is_last(segment):
+                break
             remaining -= length
             segment += 1
             start, end = self._point(segment), self._point(segment + 1)

@@ -52,6 +52,26 @@ def test_looping_route_keeps_going_round():
     assert np.abs(log.velocity[-100:, 0]).min() > 0.1
 
 
+@pytest.mark.parametrize(
+    "waypoints",
+    [
+        [[0.9, 1.0], [0.9, 1.0], [0.9, 1.0]],  # a loop of one point, the start: zero length
+        [[1.0, 1.0], [1.5, 1.0], [1.5, 1.5]],  # a loop of 1.7 m, all within the lookahead
+    ],
+)
+def test_a_loop_within_the_lookahead_gives_a_command(waypoints):
+    """Regression (found by tests/scenarios/test_fuzz.py): with every waypoint of a looping
+    route within the lookahead of the robot, the segment search went round the loop forever;
+    a command now looks at most one lap ahead."""
+    from robotsim.control import PurePursuit
+
+    route = Route(np.array(waypoints), loop=True, lookahead_m=16.0)
+    controller = PurePursuit(route, RobotParams())
+    for k in range(20):
+        v, omega = controller.command(0.1 * k, 0.9, 1.0 + 0.01 * k, 0.0)
+        assert np.isfinite(v) and np.isfinite(omega)
+
+
 def test_a_route_starting_behind_the_robot_turns_in_place_first():
     route = Route([[2.0, 4.0]])
     log = simulate(
