@@ -18,9 +18,9 @@ given per run (leading axis ``B``). Each returns the first status that is not ``
 outputs are then partly written and to be discarded).
 
 The arguments are passed on one by one: a tuple of arrays passed as ``*args`` costs a step
-some 200 ns. Factories rather than cores taking ``run`` as an argument: numba does not cache an entry that
-passes a function which itself passes a function (the kernel); the entries Python calls are
-module-level functions of the filter modules that call what these build.
+some 200 ns. Factories rather than cores taking ``run`` as an argument: numba does not cache
+an entry that passes a function which itself passes a function (the kernel); the entries
+Python calls are module-level functions of the filter modules that call what these build.
 """
 
 from __future__ import annotations
