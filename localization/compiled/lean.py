@@ -55,7 +55,7 @@ import numba
 import numpy as np
 
 from localization.compiled import ekf, motion, ukf
-from localization.compiled.batch import carve
+from localization.compiled.batch import borrow, carve
 from localization.compiled.glue import NOT_POSITIVE_DEFINITE, OK, WRONG_SIZE, pack_args
 from localization.errors import EstimationError
 from localization.gaussian import Gaussian
@@ -79,7 +79,7 @@ STATE_DIMENSIONS = {
 # ------------------------------------------------------------------------ compiled entries
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _constants(work, layout):
     """Views of the constants at the head of ``work`` (module docstring): ``(predict weights
     (3,), update weights (3,), args (k,), noise (q, q), R (m, m), state angles, measurement
@@ -103,25 +103,32 @@ def _constants(work, layout):
     )
 
 
-@numba.njit
+@numba.njit(inline="always")
 def _state(work, start, n):
     """The state from ``start``: ``(mean (n,), cov (n, n), end)``."""
-    end = start + n + n * n
-    return work[start : start + n], work[start + n : end].reshape((n, n)), end
+    cov, end = carve(work, start + n, n, n)
+    return work[start : start + n], cov, end
+
+
+# The arguments are spelled out, not passed on as ``*args`` (:mod:`localization.compiled.batch`).
 
 
 @numba.njit
-def _ukf_predict(model, augmented, *run_args):
+def _ukf_predict(model, augmented, x, prior, args, noise, weights, angles, out_mean, out_cov, s):
     """The UKF's built-in prediction of one run, additive or augmented noise."""
     if augmented:
-        return ukf.builtin_augmented_predict_run(model, *run_args)
-    return ukf.builtin_predict_run(model, *run_args)
+        run = ukf.builtin_augmented_predict_run
+        return run(model, x, prior, args, noise, weights, angles, out_mean, out_cov, s)
+    run = ukf.builtin_predict_run
+    return run(model, x, prior, args, noise, weights, angles, out_mean, out_cov, s)
 
 
 @numba.njit
-def _ekf_predict(model, augmented, *run_args):
+def _ekf_predict(model, augmented, x, prior, args, noise, weights, angles, out_mean, out_cov, s):
     """The EKF's built-in prediction of one run (additive noise: ``augmented`` is 0)."""
-    return ekf.builtin_predict_run(model, *run_args)
+    return ekf.builtin_predict_run(
+        model, x, prior, args, noise, weights, angles, out_mean, out_cov, s
+    )
 
 
 def _filter_step(predict, update, predict_length, update_length):
@@ -133,7 +140,7 @@ def _filter_step(predict, update, predict_length, update_length):
     end)``; ``step(work, z, layout)``: the step of :func:`ukf_step`. A factory for the reason of
     :mod:`localization.compiled.batch`."""
 
-    @numba.njit
+    @numba.njit(inline="always")
     def views(work, layout):
         n, m, q = layout[_N], layout[_M], layout[_Q]
         constants = _constants(work, layout)
@@ -147,6 +154,7 @@ def _filter_step(predict, update, predict_length, update_length):
     def step(work, z, layout) -> int:
         if z.shape[0] != layout[_M]:
             return WRONG_SIZE
+        work, z, layout = borrow(work), borrow(z), borrow(layout)  # the arguments: alive
         constants, (mean, cov), beliefs, (predict_scratch, update_scratch), _ = views(work, layout)
         w_predict, w_update, args, noise, r_cov, state_angles, z_angles = constants
         n = mean.shape[0]
@@ -156,11 +164,33 @@ def _filter_step(predict, update, predict_length, update_length):
             beliefs[2 : 2 + n],
             beliefs[2 + n :],
         )
-        predict_args = (mean, cov, args, noise, w_predict, state_angles, prior_mean, prior_cov)
-        status = predict(layout[_MODEL], layout[_AUGMENTED], *predict_args, predict_scratch)
+        status = predict(
+            layout[_MODEL],
+            layout[_AUGMENTED],
+            mean,
+            cov,
+            args,
+            noise,
+            w_predict,
+            state_angles,
+            prior_mean,
+            prior_cov,
+            predict_scratch,
+        )
         if status == OK:
-            update_args = (prior_mean, prior_cov, z, args, r_cov, w_update, state_angles, z_angles)
-            status = update(*update_args, new_mean, new_cov, update_scratch)
+            status = update(
+                prior_mean,
+                prior_cov,
+                z,
+                args,
+                r_cov,
+                w_update,
+                state_angles,
+                z_angles,
+                new_mean,
+                new_cov,
+                update_scratch,
+            )
         if status == OK:
             mean[:] = new_mean
             cov[:] = new_cov

@@ -24,8 +24,15 @@ TWO_PI = 2.0 * math.pi
 
 @numba.njit(cache=True, inline="always")
 def wrap_angle(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to ``[-pi, pi)`` (the same formula as :func:`localization.linalg.wrap_angle`)."""
-    wrapped = (angle_rad + math.pi) % TWO_PI - math.pi
+    """``angle_rad`` wrapped to ``[-pi, pi)`` (the same formula as :func:`localization.linalg.wrap_angle`).
+
+    The common case, ``angle_rad + pi`` already in ``[0, 2 pi)``, skips the modulo (a call of
+    ``fmod``), which returns its argument there: the same result bit for bit.
+    """
+    shifted = angle_rad + math.pi
+    if 0.0 <= shifted < TWO_PI:
+        return shifted - math.pi
+    wrapped = shifted % TWO_PI - math.pi
     if wrapped >= math.pi:
         wrapped -= TWO_PI
     return wrapped
@@ -86,12 +93,16 @@ def cholesky_solve(factor, rhs, out) -> None:
 
 @numba.njit(cache=True)
 def all_finite(values) -> bool:
-    """Whether every entry of a contiguous float array is finite."""
-    # an explicit loop: numba compiles it to an early exit without a temporary array
-    for value in values.ravel():  # noqa: SIM110
-        if not math.isfinite(value):
-            return False
-    return True
+    """Whether every entry of a float array is finite.
+
+    ``value * 0`` is 0 for a finite value and NaN for an infinite or NaN one, so the sum is 0
+    exactly when all are finite: one pass without a branch a value, no temporary array, and
+    ``flat`` rather than ``ravel()`` (a call of numba's reshape helper, about 50 ns).
+    """
+    total = 0.0
+    for value in values.flat:
+        total += value * 0.0
+    return total == 0.0
 
 
 @numba.njit(cache=True)

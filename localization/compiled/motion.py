@@ -106,15 +106,15 @@ def _along_arc_point(x, theta, length, turn, out) -> None:
     The arc starts at heading ``theta``, has the signed ``length`` (m) and turns by ``turn``
     (rad). Its displacement ``length (M_0^c, M_0^s)(turn)`` in the frame of ``theta`` is the
     chord, ``(M_0^c, M_0^s)(u) = sinc(u/2) (cos, sin)(u/2)``, so in the world frame it is
-    ``length sinc(turn/2) (cos, sin)(theta + turn/2)``. ``sinc(h) = sin(a)/a`` with
-    ``a = hypot(h, 1e-300)``, which is ``|h|`` unless ``|h|`` is below about 1e-290, where the
-    ratio is exactly 1 anyway (``sinc`` is even): no turn needs no branch and gives the
-    straight line bit for bit. The heading is wrapped to ``[-pi, pi)``.
+    ``length sinc(turn/2) (cos, sin)(theta + turn/2)``, ``sinc(0) = 1``: no turn gives the
+    straight line bit for bit. (Until session 24 ``sinc(h)`` was ``sin(a)/a`` with ``a =
+    hypot(h, 1e-300)``, without a branch; ``a`` is ``|h|`` there unless ``|h|`` is below about
+    1e-290, where both ratios are exactly 1, so the two agree bit for bit, the branch without
+    the ``hypot`` call.) The heading is wrapped to ``[-pi, pi)``.
     """
     out[:] = x
     half = 0.5 * turn
-    a = math.hypot(half, 1e-300)
-    chord = math.sin(a) / a * length
+    chord = (math.sin(half) / half if half != 0.0 else 1.0) * length
     direction = theta + half
     out[0] = x[0] + chord * math.cos(direction)
     out[1] = x[1] + chord * math.sin(direction)

@@ -73,22 +73,32 @@ def test_wrapping_matches_the_numpy_functions():
                 0.0,
                 3 * math.pi,
                 -3 * math.pi,
+                # the fast path (no modulo) where the shift by pi loses the angle's low bits
+                1e-20,
+                -1e-20,
+                -0.0,
+                np.nextafter(math.pi, 0.0),
+                np.nextafter(-math.pi, 0.0),
             ],
         ]
     )
     wrapped = np.array([wrap_angle(a) for a in angles])
     np.testing.assert_array_equal(wrapped, linalg.wrap_angle(angles))
     assert wrapped.min() >= -math.pi and wrapped.max() < math.pi
+    assert math.isnan(wrap_angle(math.nan)) and math.isnan(wrap_angle(math.inf))
     residuals = np.array([wrap_residual(a) for a in angles])
     np.testing.assert_array_equal(residuals, linalg.wrap_residual(angles))
 
 
 def test_all_finite():
-    values = np.zeros((3, 4))
-    assert all_finite(values)
-    for bad in (np.nan, np.inf, -np.inf):
-        values[2, 1] = bad
-        assert not all_finite(values)
+    # values whose sum overflows are finite all the same
+    for values in (np.zeros((3, 4)), np.full(3, 1.7e308), np.full((2, 2), -1.7e308)):
+        assert all_finite(values)
+        for bad in (np.nan, np.inf, -np.inf):
+            changed = values.copy()
+            changed.flat[-1] = bad
+            assert not all_finite(changed)
+    assert all_finite(np.zeros(0))
 
 
 @pytest.mark.parametrize(("n", "m"), [(5, 3), (8, 3), (4, 2)])

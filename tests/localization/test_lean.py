@@ -9,6 +9,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
@@ -174,6 +175,11 @@ def test_the_lean_filters_refuse_what_they_cannot_run():
         lean.mean[0] = 1.0  # the views are read-only
 
 
+# The end of the views only: the views are borrowed (``compiled.batch.borrow``), not for Python.
+_UKF_WORK_END = numba.njit(lambda work, layout: lean_module.ukf_views(work, layout)[-1])
+_EKF_WORK_END = numba.njit(lambda work, layout: lean_module.ekf_views(work, layout)[-1])
+
+
 @pytest.mark.parametrize(("name", "noise"), CASES)
 def test_the_work_array_is_carved_to_its_last_entry(name, noise):
     """The Python length of the work array and the compiled views of it agree: the views tile
@@ -183,8 +189,8 @@ def test_the_work_array_is_carved_to_its_last_entry(name, noise):
     if noise == ProcessNoise.ADDITIVE:
         filters.append(LeanEKF(process, measurement, belief, DT_S))
     for lean in filters:
-        views = lean_module.ukf_views if isinstance(lean, LeanUKF) else lean_module.ekf_views
-        assert views(lean._work, lean._layout)[-1] == lean._work.shape[0], type(lean).__name__
+        end = _UKF_WORK_END if isinstance(lean, LeanUKF) else _EKF_WORK_END
+        assert end(lean._work, lean._layout) == lean._work.shape[0], type(lean).__name__
 
 
 def _refused_measurements(z: np.ndarray) -> dict[str, object]:

@@ -196,6 +196,30 @@ def test_ctrv_with_vanishing_turn_rate_is_a_straight_line():
     np.testing.assert_allclose(mm.ctrv_transition(x, dt_s)[:2], ref, rtol=1e-13)
 
 
+def test_arc_chord_equals_its_hypot_form_bit_for_bit():
+    """The arc's ``sinc(turn / 2)`` takes a branch at no turn; the earlier branch-free form
+    ``sin(a) / a``, ``a = hypot(turn / 2, 1e-300)``, written here in plain ``math``, gives the
+    same positions bit for bit, at tiny, subnormal and ordinary turns of either sign."""
+    rng = np.random.default_rng(7)
+    turns = np.concatenate(
+        [
+            rng.normal(size=400) * 10.0 ** rng.uniform(-320.0, 1.0, 400),
+            [0.0, -0.0, 5e-324, -5e-324, 1e-300, -1e-290, 1e-150, 3.0, -6.2],
+        ]
+    )
+    x = np.array([10.0, -4.0, 2.1, 13.0, 0.0])
+    dt_s = 0.5
+    for omega_t in turns:
+        x[4] = omega_t / dt_s
+        turn = x[4] * dt_s
+        half = 0.5 * turn
+        a = math.hypot(half, 1e-300)
+        chord = math.sin(a) / a * (x[3] * dt_s)
+        direction = x[2] + half
+        expected = (x[0] + chord * math.cos(direction), x[1] + chord * math.sin(direction))
+        assert tuple(mm.ctrv_transition(x, dt_s)[:2]) == expected, omega_t
+
+
 def test_ctra_matches_paper_eq8_eq9_away_from_zero_turn_rate():
     x = np.array([1.0, 2.0, -0.8, 7.0, 1.5, 0.4])
     dt_s = 1.3
