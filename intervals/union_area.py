@@ -69,8 +69,9 @@ def union_area(x_lo, x_hi, y_lo, y_hi):
     ``(N,)`` of float64, units: those of x times those of y).
 
     Rectangles with ``x_lo >= x_hi`` or ``y_lo >= y_hi`` (flat or empty) add nothing; ``N = 0``
-    gives 0. The bounds must be finite (not NaN, not infinite): otherwise the result is
-    meaningless (NaN or infinite), not an error.
+    gives 0. The bounds must be free of NaN (as :func:`intervals.boxes.as_boxes` checks): a
+    rectangle with a NaN bound fails the test above and is skipped as though empty. Infinite
+    bounds give an infinite or NaN area.
     """
     n = x_lo.shape[0]
     keep = np.empty(n, dtype=np.bool_)

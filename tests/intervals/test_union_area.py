@@ -144,3 +144,9 @@ def test_small_slabs_are_not_lost_beside_a_large_one():
         np.r_[0.0, 2.0 + k], np.r_[1.0, 3.0 + k], np.zeros(1001), np.r_[1.0, 1e-16 * np.ones(1000)]
     )
     assert area_xy(boxes) == pytest.approx(1.0 + 1e-13, rel=0.0, abs=1e-15)
+
+
+def test_a_box_with_a_nan_bound_is_skipped():
+    # documented behaviour for input that as_boxes would have rejected
+    boxes = boxes_from([0.0, np.nan, 5.0], [1.0, 2.0, 6.0], [0.0, 0.0, 0.0], [1.0, 1.0, np.nan])
+    assert area_xy(boxes) == 1.0
