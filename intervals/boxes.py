@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from intervals.errors import IntervalError
+from intervals.union_area import union_area
 
 DEFAULT_HEADING_SCALE_M_PER_RAD = 1.0
 """Default metres per radian of the heading axis: a heading error of 1 rad moves a point 1 m
@@ -199,23 +200,11 @@ def volume(boxes: np.ndarray) -> float:
 def area_xy(boxes: np.ndarray) -> float:
     """Area in m^2 of the union of the (x, y) projections of the boxes ``(N, d >= 2, 2)``.
 
-    Exact union (not the sum): the projections are rasterised on the grid of their own edge
-    coordinates with a 2-D difference array, so overlapping projections count once.
+    Exact union (not the sum), by a sweep over x with a segment tree over y
+    (:func:`intervals.union_area.union_area`): ``O(N log N)`` time, ``O(N)`` memory.
     """
-    if boxes.shape[0] == 0:
-        return 0.0
-    xs = np.unique(boxes[:, 0, :])
-    ys = np.unique(boxes[:, 1, :])
-    i0, i1 = np.searchsorted(xs, boxes[:, 0, 0]), np.searchsorted(xs, boxes[:, 0, 1])
-    j0, j1 = np.searchsorted(ys, boxes[:, 1, 0]), np.searchsorted(ys, boxes[:, 1, 1])
-    cover = np.zeros((xs.size + 1, ys.size + 1), dtype=np.int64)
-    np.add.at(cover, (i0, j0), 1)
-    np.add.at(cover, (i1, j0), -1)
-    np.add.at(cover, (i0, j1), -1)
-    np.add.at(cover, (i1, j1), 1)
-    covered = np.cumsum(np.cumsum(cover, axis=0), axis=1)[:-2, :-2] > 0
-    cell_area = np.outer(np.diff(xs), np.diff(ys))
-    return float(np.sum(cell_area[covered]))
+    x, y = np.ascontiguousarray(boxes[:, 0, :].T), np.ascontiguousarray(boxes[:, 1, :].T)
+    return float(union_area(x[0], x[1], y[0], y[1]))
 
 
 def _sweep_axes(boxes: np.ndarray, periodic_axis: int | None) -> tuple[int, int, int]:

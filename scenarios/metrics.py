@@ -338,15 +338,26 @@ def route_stats(spec: ScenarioSpec, log: SimulationLog) -> dict[str, Any]:
     return stats
 
 
-def set_wall_distance_m(epochs: EpochLog, segments: np.ndarray) -> np.ndarray:
+SET_WALL_BLOCK_BOXES = 20_000
+"""Boxes :func:`set_wall_distance_m` turns into shapely polygons at a time: a polygon costs
+about 0.35 KiB, so a run's 660 000 stored boxes at once (big_hall with lost echoes, 600 s)
+made a 230 MiB transient, the run's peak; a block costs about 7 MiB."""
+
+
+def set_wall_distance_m(
+    epochs: EpochLog, segments: np.ndarray, block_boxes: int = SET_WALL_BLOCK_BOXES
+) -> np.ndarray:
     """``(E,)`` the distance from each epoch's set (the union of its outer boxes in x, y) to
     the nearest wall segment ``(m, 2, 2)``, m: the least distance of its boxes (0 where a
-    box touches a wall; NaN without a set). One vectorised shapely call over all boxes."""
+    box touches a wall; NaN without a set). Vectorised shapely calls over ``block_boxes``
+    boxes at a time (the result does not depend on it)."""
     walls = shapely.multilinestrings(shapely.linestrings(segments))
     boxes = epochs.boxes
-    each = shapely.distance(
-        shapely.box(boxes[:, 0, 0], boxes[:, 1, 0], boxes[:, 0, 1], boxes[:, 1, 1]), walls
-    )
+    each = np.empty(len(boxes))
+    for start in range(0, len(boxes), block_boxes):
+        b = boxes[start : start + block_boxes]
+        polygons = shapely.box(b[:, 0, 0], b[:, 1, 0], b[:, 0, 1], b[:, 1, 1])
+        each[start : start + block_boxes] = shapely.distance(polygons, walls)
     distance = np.full(len(epochs.t_s), np.nan)
     with_boxes = epochs.box_counts > 0
     starts = (np.cumsum(epochs.box_counts) - epochs.box_counts)[with_boxes]

@@ -11,6 +11,7 @@ from robotsim.maps import point_segment_distance
 from robotsim.sensors.sonar import cone_distances
 from scenarios.commands import guarantee_failure
 from scenarios.errors import ScenarioError
+from scenarios.metrics import set_wall_distance_m
 from scenarios.pipeline import FUSED, RECOVERY_DISTANCE_M, RECOVERY_HOLD_S, localizer_for
 from scenarios.runner import run_scenario
 from scenarios.spec import BUILTIN_FOLDER, parse_scenario
@@ -293,6 +294,16 @@ def test_the_safety_share_against_a_direct_computation():
     # the sets held the truth at every epoch: at an epoch sample, never inside while clear
     at_epochs = estimation.epoch_index
     assert not (inside[at_epochs] & said_clear[at_epochs]).any()
+
+
+def test_the_set_wall_distance_does_not_depend_on_its_block_size():
+    spec = parse_scenario(hall_with("", duration_s=10.0), source="s.toml")
+    epochs = run_scenario(spec).estimation.epochs
+    segments = spec.map.segments
+    whole = set_wall_distance_m(epochs, segments, block_boxes=len(epochs.boxes))
+    assert len(epochs.boxes) > 50 and np.isfinite(whole).sum() > 5
+    for block in (1, 7, 50):  # blocks that split epochs' sets, and a short last block
+        np.testing.assert_array_equal(set_wall_distance_m(epochs, segments, block), whole)
 
 
 def test_a_declared_fault_is_not_reported_as_a_broken_guarantee():
