@@ -42,7 +42,8 @@ def wrap_angle(angle_rad: np.ndarray) -> np.ndarray:
     )  # a new array (or numpy float): the steps below work in place
     wrapped %= TWO_PI
     wrapped -= math.pi
-    if wrapped.size and wrapped.max() >= math.pi:  # rare: one comparison pass in the common case
+    # rare: one comparison pass in the common case (not '>= pi': a NaN makes the max NaN)
+    if wrapped.size and not wrapped.max() < math.pi:
         wrapped = np.where(wrapped >= math.pi, wrapped - TWO_PI, wrapped)[()]
     return wrapped
 

@@ -129,3 +129,15 @@ def test_kalman_gain_matches_the_textbook_gain(n, m):
         np.empty((2, 2)),
         np.empty((2, 2)),
     )
+
+
+def test_numpy_wrap_keeps_the_half_open_range_beside_a_nan():
+    """A NaN in the array made the numpy wrap skip its edge fix for every element (its
+    maximum was NaN): the angle just below -pi then came out as +pi."""
+    from localization.linalg import wrap_angle as numpy_wrap
+
+    below = np.nextafter(-np.pi, -4.0)
+    alone = numpy_wrap(np.array([below]))
+    beside = numpy_wrap(np.array([np.nan, below]))
+    assert np.isnan(beside[0]) and beside[1] == alone[0]
+    assert -np.pi <= beside[1] < np.pi
