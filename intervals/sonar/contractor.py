@@ -371,7 +371,9 @@ def contract_into(
                 ix1 = min(math.floor((hx_hi - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
                 iy0 = max(math.floor((hy_lo - grid_origin[1]) / grid_cell_m) - 1, 0)
                 iy1 = min(math.floor((hy_hi - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
-                for ix in range(ix0, ix1 + 1):
+                # a hull beyond the grid's last row or column meets no cell (and its row
+                # range would index past ``grid_starts``)
+                for ix in range(ix0, ix1 + 1 if iy0 <= iy1 else ix0):
                     if remaining <= q:
                         break
                     for member in range(grid_starts[ix * ny + iy0], grid_starts[ix * ny + iy1 + 1]):

@@ -136,6 +136,35 @@ def test_impossible_reading_empties_and_no_echo_leaves_the_box():
     assert not np.isnan(contract(box, scan, 1)).any()
 
 
+def test_echoes_beyond_the_grid_read_no_cell_past_its_end(monkeypatch):
+    """Regression (a segfault in CI, test_physical_bounds): an echo whose hit points all lie
+    beyond the segment grid's last row made the contractor read ``grid_starts`` past its
+    end (in the last column). The kernel compiled with bounds checks, on a box just outside
+    the hall's north-east corner (a predicted box may reach out of the map) with one echo
+    straight up: no index error, and the box emptied (no wall there explains it)."""
+    import numba
+
+    from intervals.sonar import contractor as contractor_module
+
+    checked = numba.njit(boundscheck=True)(contractor_module.contract_into.py_func)
+    monkeypatch.setattr(contractor_module, "contract_into", checked)
+    segments = builtin_map("hall").segments
+    belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=False)
+    right, top = float(segments[..., 0].max()), float(segments[..., 1].max())
+    heading = np.pi / 2 - DEFAULT_BELT.mount_angle_rad[0]  # sensor 0 points north
+    box = np.array(
+        [[[right - 0.3, right - 0.1], [top + 0.5, top + 0.6], [heading - 0.01, heading + 0.01]]]
+    )
+    readings = np.full(belt.count, np.inf)
+    readings[0] = DEFAULT_BELT.d_max_m - 0.1  # hits 3.2 m and more above the north wall
+    scan = SonarScan(segments, belt, readings)
+    assert scan.scene is not None
+    grid = scan.scene.grid
+    assert top + 3.2 > grid.origin[1] + (grid.shape[1] + 2) * grid.cell_m  # two rows past
+    assert np.isnan(contract(box, scan, 0)).all()
+    assert not np.isnan(contract(box, scan, 1)).any()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD[1:3])
 def test_shaving_keeps_every_consistent_pose_and_narrows_the_heading(gamma):
