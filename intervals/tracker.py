@@ -72,6 +72,13 @@ from validated_records import bounded, validate_fields
 #: tight and costs no component search).
 SPREAD_FACTOR = 8.0
 
+
+def _unwrapped(boxes: np.ndarray) -> np.ndarray:
+    """``boxes (N, 3, 2)`` with their headings unwrapped near the first box's (a set across
+    the +-pi cut as one narrow heading interval, possibly beyond ``pi``)."""
+    return unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+
+
 #: Cells per axis of the grid on which :func:`covered_volume` counts what boxes cover.
 COVER_CELLS = 32
 
@@ -335,7 +342,7 @@ class EpochResult:
         boxes = self.outer
         if boxes.shape[0] == 0:
             return np.full((3, 2), np.nan)
-        return hull(unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0))
+        return hull(_unwrapped(boxes))
 
 
 def global_box(map_bounds) -> np.ndarray:
@@ -396,7 +403,7 @@ class IntervalTracker:
         if not (np.isfinite(dt_s) and dt_s >= 0):
             raise IntervalError(f"tracker: dt_s must be finite and >= 0, got {dt_s!r}")
         boxes = previous.outer
-        boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+        boxes = _unwrapped(boxes)
         s = self.settings
         scale = pose_scale(s.heading_scale_m_per_rad)
         if s.tracker == Tracker.SIVIA:
@@ -430,7 +437,7 @@ class IntervalTracker:
         if s.eps_cells == 0:
             return s.eps_m
         boxes = previous.outer
-        whole = hull(unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0))
+        whole = hull(_unwrapped(boxes))
         width = whole[:, 1] - whole[:, 0]
         span_m = float(width[0] + width[1])
         if not (width[2] > 0 and span_m > 0):
@@ -443,7 +450,7 @@ class IntervalTracker:
         """The hull of ``previous`` (headings unwrapped near its first box) grown by the
         limits over ``dt_s``, headings wrapped."""
         boxes = previous.outer
-        boxes = unwrap_headings(boxes, (boxes[0, 2, 0] + boxes[0, 2, 1]) / 2.0)
+        boxes = _unwrapped(boxes)
         return wrap_headings(self.limits(hull(boxes)[None], dt_s))
 
     def _search(
