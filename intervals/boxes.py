@@ -477,7 +477,7 @@ def _before(boxes, i, j, axis):
 
 
 @numba.njit(cache=True)
-def _sorted_rows(boxes, axis):
+def sorted_rows(boxes, axis):
     """``(N,)`` the rows of ``boxes (N, d, 2)`` in :func:`_before`'s order, ties in row order
     (a stable bottom-up merge sort, as ``np.lexsort`` is stable: the same permutation)."""
     n = boxes.shape[0]
@@ -502,10 +502,10 @@ def _sorted_rows(boxes, axis):
 @numba.njit(cache=True)
 def _merge_along(boxes, axis):
     """One pass of :func:`merge_adjacent` along ``axis``: ``boxes (N, d, 2)`` sorted
-    (:func:`_sorted_rows`), each run of rows with equal bounds on the other axes, each
+    (:func:`sorted_rows`), each run of rows with equal bounds on the other axes, each
     starting where the one before ends on ``axis``, joined into its first row."""
     n, d = boxes.shape[0], boxes.shape[1]
-    order = _sorted_rows(boxes, axis)
+    order = sorted_rows(boxes, axis)
     out = np.empty_like(boxes)
     count = 0
     for k in range(n):

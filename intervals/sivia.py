@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, copy_box, max_width
+from intervals.boxes import Subpaving, as_boxes, copy_box, max_width, sorted_rows
 from intervals.errors import IntervalError
 
 
@@ -180,6 +180,62 @@ def _sorted_level(boxes, verdicts, scale, idle, eps):
 
 
 @numba.njit(cache=True)
+def _joined_along(boxes, idle, scores, axis):
+    """One pass of :func:`_joined_idle` along ``axis``: ``(boxes, idle, scores)`` with every
+    run of rows of ``boxes (N, d, 2)`` idle along ``axis`` (``idle (N, d)``), with equal bounds
+    on the other axes, each starting where the one before ends on ``axis`` (``hi == lo``),
+    joined into one row (:func:`intervals.boxes.merge_adjacent`'s order and test, restricted
+    to idle rows): its idle axes those idle in every row of the run, its score the lowest
+    of ``scores (N,)``."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    order = sorted_rows(boxes, axis)
+    out = np.empty_like(boxes)
+    out_idle = np.empty_like(idle)
+    out_scores = np.empty_like(scores)
+    count = 0
+    for k in range(n):
+        row = order[k]
+        joined = count > 0 and idle[row, axis] and out_idle[count - 1, axis]
+        last = count - 1
+        if joined:
+            for a in range(d):
+                if a != axis and (
+                    boxes[row, a, 0] != out[last, a, 0] or boxes[row, a, 1] != out[last, a, 1]
+                ):
+                    joined = False
+                    break
+            joined = joined and boxes[row, axis, 0] == out[last, axis, 1]
+        if joined:
+            out[last, axis, 1] = boxes[row, axis, 1]
+            out_scores[last] = min(out_scores[last], scores[row])
+            for a in range(d):
+                out_idle[last, a] = out_idle[last, a] and idle[row, a]
+        else:
+            copy_box(boxes, row, out, count)
+            out_idle[count, :] = idle[row, :]
+            out_scores[count] = scores[row]
+            count += 1
+    return out[:count].copy(), out_idle[:count].copy(), out_scores[:count].copy()
+
+
+def _joined_idle(
+    boxes: np.ndarray, idle: np.ndarray, scores: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Undecided boxes ``(N, d, 2)`` to bisect, rows that only a cut across an idle axis
+    separates joined back (:func:`_joined_along`, each axis in turn): the same union, with
+    their idle axes ``(N, d)`` and scores ``(N,)``. A row of boxes idle along an axis is cut
+    there by the bisections made before the test could tell (SIVIA's first levels, or
+    ``min_level_boxes``: big_hall's strips along its walls, cut into 16 slabs from the whole
+    hall, each then paved across the strip alike); joined, the row is paved once. The input
+    as it is, order kept, when nothing joins."""
+    joined = (boxes, idle, scores)
+    for axis in range(boxes.shape[1]):
+        if joined[0].shape[0] > 1 and joined[1][:, axis].any():
+            joined = _joined_along(*joined, axis)
+    return joined if joined[0].shape[0] < boxes.shape[0] else (boxes, idle, scores)
+
+
+@numba.njit(cache=True)
 def _by_parent(children, parents, n):
     """``children (M, d, 2)`` in the order of their ``parents (M,)`` (rows ``0..n-1``), each
     parent's in their own order: a stable counting sort (``argsort(parents, "stable")``)."""
@@ -265,7 +321,10 @@ def sivia(
     Idle axes (the test's third output, :data:`BoxTest`): the undecided boxes are never cut
     across their idle axes (nor their children, which inherit them), and a box is small when
     its other axes are no wider than ``eps`` (a box idle along every axis is kept whole): the
-    cuts are a choice, any choice keeps the set sound.
+    cuts are a choice, any choice keeps the set sound. For the same reason the undecided boxes
+    of a level that a cut across a shared idle axis alone separates (adjacent along it, equal
+    bounds on the other axes) are joined before they are bisected (:func:`_joined_idle`): the
+    same union, paved once instead of once a piece.
     Preconditions (checked first, :class:`IntervalError`): ``eps > 0`` and finite, at least one
     non-empty bounded box, ``scale`` positive. Returns a :class:`Subpaving`.
     """
@@ -321,9 +380,12 @@ def sivia(
         inner.append(kept)
         boundary.append(small)
         if wide.shape[0]:
+            wide_scores = scores[rows]
+            if idle is not None:
+                wide, wide_idle, wide_scores = _joined_idle(wide, wide_idle, wide_scores)
             budget = max_tested is not None
             if budget:  # under a budget, the lowest scores' children first
-                order = np.argsort(scores[rows], kind="stable")
+                order = np.argsort(wide_scores, kind="stable")
                 wide, wide_idle = wide[order], wide_idle[order]
             splits = max(splits_per_level, _extra_splits(wide, min_level_boxes))
             pending.append(_split(wide, eps, unit, splits, grouped=budget, idle=wide_idle))
