@@ -500,26 +500,30 @@ def sorted_rows(boxes, axis):
 
 
 @numba.njit(cache=True)
+def continues_along(boxes, row, out, last, axis):
+    """Whether row ``row`` of ``boxes (N, d, 2)`` continues row ``last`` of ``out (M, d, 2)``
+    along ``axis``: equal bounds on the other axes, and it starts where that one ends
+    (``hi == lo``, in floating point), so that the two join into one box exactly."""
+    for a in range(boxes.shape[1]):
+        if a != axis and (
+            boxes[row, a, 0] != out[last, a, 0] or boxes[row, a, 1] != out[last, a, 1]
+        ):
+            return False
+    return boxes[row, axis, 0] == out[last, axis, 1]
+
+
+@numba.njit(cache=True)
 def _merge_along(boxes, axis):
     """One pass of :func:`merge_adjacent` along ``axis``: ``boxes (N, d, 2)`` sorted
     (:func:`sorted_rows`), each run of rows with equal bounds on the other axes, each
     starting where the one before ends on ``axis``, joined into its first row."""
-    n, d = boxes.shape[0], boxes.shape[1]
+    n = boxes.shape[0]
     order = sorted_rows(boxes, axis)
     out = np.empty_like(boxes)
     count = 0
     for k in range(n):
         row = order[k]
-        joined = k > 0
-        if joined:
-            last = count - 1
-            for a in range(d):
-                if a != axis and (
-                    boxes[row, a, 0] != out[last, a, 0] or boxes[row, a, 1] != out[last, a, 1]
-                ):
-                    joined = False
-                    break
-            joined = joined and boxes[row, axis, 0] == out[last, axis, 1]
+        joined = k > 0 and continues_along(boxes, row, out, count - 1, axis)
         if joined:
             out[count - 1, axis, 1] = boxes[row, axis, 1]
         else:

@@ -16,7 +16,14 @@ import numba
 import numpy as np
 
 from intervals.bisection import split_rounds
-from intervals.boxes import Subpaving, as_boxes, copy_box, max_width, sorted_rows
+from intervals.boxes import (
+    Subpaving,
+    as_boxes,
+    continues_along,
+    copy_box,
+    max_width,
+    sorted_rows,
+)
 from intervals.errors import IntervalError
 
 
@@ -195,16 +202,9 @@ def _joined_along(boxes, idle, scores, axis):
     count = 0
     for k in range(n):
         row = order[k]
-        joined = count > 0 and idle[row, axis] and out_idle[count - 1, axis]
         last = count - 1
-        if joined:
-            for a in range(d):
-                if a != axis and (
-                    boxes[row, a, 0] != out[last, a, 0] or boxes[row, a, 1] != out[last, a, 1]
-                ):
-                    joined = False
-                    break
-            joined = joined and boxes[row, axis, 0] == out[last, axis, 1]
+        joined = count > 0 and idle[row, axis] and out_idle[last, axis]
+        joined = joined and continues_along(boxes, row, out, last, axis)
         if joined:
             out[last, axis, 1] = boxes[row, axis, 1]
             out_scores[last] = min(out_scores[last], scores[row])
