@@ -23,9 +23,10 @@ The slice is tested instead of the box: a box as long as a wall is then as well 
 a short one (the cone test of a long box is loose across it). The in-room test still sees
 the box.
 
-SIVIA never cuts a box across an idle axis (:func:`intervals.sivia.sivia`'s ``idle``): a
-strip along a wall, where the set is ambiguous by nature, is held by boxes as long as the
-prediction, and a box out of every wall's reach is kept whole. The choice of cuts is a
+SIVIA never cuts a box across an idle axis (:func:`intervals.sivia.sivia`'s ``idle``), and
+joins back the undecided boxes that a cut made before the test could tell separates only
+across one: a strip along a wall, where the set is ambiguous by nature, is held by boxes as
+long as the prediction, and a box out of every wall's reach is kept whole. The choice of cuts is a
 heuristic: any choice keeps the set sound (SIVIA only drops boxes the test rejects).
 """
 
