@@ -31,6 +31,7 @@ from intervals.imagesp import coarsen
 from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, cut_width, sivia
 from intervals.sonar import contractor, idle
 from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tighten import MAX_LEVELS, tighten
@@ -87,13 +88,20 @@ def _verdict_codes(out, inside):
     return verdicts
 
 
-def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None, parents=None):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
     of sensors rejecting each box, and which. ``probe (N, 3, 2)``: boxes within ``boxes`` whose
     sensor verdicts hold for them (:func:`intervals.sonar.idle.probes`; None: ``boxes``); the
-    in-room test always sees ``boxes``. ``boxes`` are checked pose boxes (:func:`_pose_boxes`,
-    or SIVIA's boxes), not checked again."""
-    reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
+    in-room test always sees ``boxes``. ``parents (P, 3, 2)`` (without ``inner`` or ``probe``):
+    box ``n`` is a part of ``parents[n % P]``, and the sensors' test is
+    :func:`intervals.sonar.pieces.piece_rejections` (sound, on the pairs the parent leaves).
+    ``boxes`` are checked pose boxes (:func:`_pose_boxes`, or SIVIA's boxes), not checked
+    again."""
+    if parents is not None:
+        reject = piece_rejections(boxes, parents, scan)
+        certain = np.zeros_like(reject)
+    else:
+        reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
     rejects, out, inside = _sensor_counts(reject, certain, int(q), bool(inner))
     if scan.boundary is not None:
         # the in-room test only matters for the boxes the sensors do not reject
@@ -295,8 +303,9 @@ def _pave(
                 axes[meets] = met_axes
         return verdicts, rejects, axes
 
-    def counted(b):  # the test of the tightening: (kept, counts) as SIVIA's stored boxes
-        verdicts, rejects, reject = _test_and_counts(b, local, q, False)
+    def counted(b, parents):  # the test of the tightening: (kept, counts) as SIVIA's stored
+        # boxes, each piece on the (segment, sensor) pairs its parent leaves
+        verdicts, rejects, reject = _test_and_counts(b, local, q, False, parents=parents)
         keep = verdicts != OUTSIDE
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])

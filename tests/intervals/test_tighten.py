@@ -90,7 +90,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
         assert wide.paving.volume() <= plain.paving.volume()
 
 
-def _disk(boxes):
+def _disk(boxes, parents=None):
     """``(keep, counts)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
