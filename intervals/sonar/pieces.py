@@ -36,8 +36,6 @@ C-contiguous.
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 
@@ -47,6 +45,37 @@ from intervals.sonar.cone import heading_trig
 from intervals.sonar.cone_kernel import CX, CY, ECHO, FREE, HX, HY, IGNORED, SENSOR_COLUMNS, UNION
 from intervals.sonar.geometry import ANGLE_MARGIN_RAD, ARC_SLACK, GUARD_M, NEAR_SWITCH_M
 from intervals.sonar.scan import SonarScan
+
+PARAMS = (
+    "half_aperture_rad",
+    "margin_m",
+    "guard_m",
+    "near_switch_m",
+    "arc_slack",
+    "angle_margin_rad",
+    "trig_limit_rad",
+)
+"""The tolerances of :func:`piece_rejections_into`, in the order of its ``params`` array (those
+of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`)."""
+GUARD, NEAR_SWITCH = PARAMS.index("guard_m"), PARAMS.index("near_switch_m")
+
+
+@numba.njit(cache=True)
+def _rows(box, cos_theta, sin_theta, belt, params, rows):
+    """:func:`intervals.sonar.cone_kernel.sensor_rows` with the tolerances of ``params``."""
+    return cone_kernel.sensor_rows(
+        box,
+        cos_theta,
+        sin_theta,
+        belt,
+        params[0],
+        params[1],
+        params[2],
+        params[4],
+        params[5],
+        params[6],
+        rows,
+    )
 
 
 @numba.njit(cache=True)
@@ -68,18 +97,14 @@ def piece_rejections_into(
     kind,
     reach_m,
     belt,
-    half_aperture_rad,
-    margin_m,
-    guard_m,
-    near_switch_m,
-    arc_slack,
-    angle_margin_rad,
-    trig_limit_rad,
+    params,
     reject,
 ):
     """``reject (N, k)`` in place: sensor ``i`` rejects piece ``n`` (module doc). The arguments
     as :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`'s, with the ``parents (P, 3, 2)``
-    and the ``cos``/``sin`` of their heading bounds beside the pieces'."""
+    and the ``cos``/``sin`` of their heading bounds beside the pieces', and the tolerances in
+    ``params`` (:data:`PARAMS`)."""
+    guard_m, near_switch_m = params[GUARD], params[NEAR_SWITCH]
     k, n_parents = belt.shape[0], parents.shape[0]
     rows = np.empty((k, SENSOR_COLUMNS))
     hit = np.empty(k, dtype=np.bool_)
@@ -98,33 +123,11 @@ def piece_rejections_into(
     pairs = np.empty((segments.shape[0], k), dtype=np.bool_)
     for p in range(n_parents):
         # the parent's sensor boxes and wedges, the segments within reach of their hull
-        cone_kernel.sensor_rows(
-            parents[p],
-            parent_cos[p],
-            parent_sin[p],
-            belt,
-            half_aperture_rad,
-            margin_m,
-            guard_m,
-            arc_slack,
-            angle_margin_rad,
-            trig_limit_rad,
-            rows,
+        _rows(parents[p], parent_cos[p], parent_sin[p], belt, params, rows)
+        hull_cx, hull_cy, hull_hx, hull_hy = cone_kernel.sensor_hull(rows)
+        ix0, ix1, iy0, iy1 = cone_kernel.reach_cells(
+            hull_cx, hull_cy, hull_hx, hull_hy, visible, grid_origin, grid_cell_m, nx, ny
         )
-        sx_lo, sx_hi = rows[0, CX] - rows[0, HX], rows[0, CX] + rows[0, HX]
-        sy_lo, sy_hi = rows[0, CY] - rows[0, HY], rows[0, CY] + rows[0, HY]
-        for i in range(1, k):
-            sx_lo = cone_kernel._min(sx_lo, rows[i, CX] - rows[i, HX])
-            sx_hi = cone_kernel._max(sx_hi, rows[i, CX] + rows[i, HX])
-            sy_lo = cone_kernel._min(sy_lo, rows[i, CY] - rows[i, HY])
-            sy_hi = cone_kernel._max(sy_hi, rows[i, CY] + rows[i, HY])
-        hull_cx, hull_cy = (sx_lo + sx_hi) / 2, (sy_lo + sy_hi) / 2
-        hull_hx, hull_hy = (sx_hi - sx_lo) / 2, (sy_hi - sy_lo) / 2
-        radius = visible + math.hypot(hull_hx, hull_hy)
-        ix0 = max(math.floor((hull_cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
-        ix1 = min(math.floor((hull_cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
-        iy0 = max(math.floor((hull_cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
-        iy1 = min(math.floor((hull_cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
         count = 0
         for ix in range(ix0, ix1 + 1):
             for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
@@ -173,19 +176,7 @@ def piece_rejections_into(
                         count += 1
         # each piece of this parent on those pairs only
         for n in range(p, pieces.shape[0], n_parents):
-            sure = cone_kernel.sensor_rows(
-                pieces[n],
-                piece_cos[n],
-                piece_sin[n],
-                belt,
-                half_aperture_rad,
-                margin_m,
-                guard_m,
-                arc_slack,
-                angle_margin_rad,
-                trig_limit_rad,
-                rows,
-            )
+            sure = _rows(pieces[n], piece_cos[n], piece_sin[n], belt, params, rows)
             hit[:] = False
             fires[:] = False
             close[:] = False
@@ -260,13 +251,17 @@ def piece_rejections(pieces: np.ndarray, parents: np.ndarray, scan: SonarScan) -
         scan.kind,
         scan.reach_m,
         belt.kernel_table,
-        belt.half_aperture_rad,
-        belt.sensor_box_margin_m,
-        GUARD_M,
-        NEAR_SWITCH_M,
-        ARC_SLACK,
-        ANGLE_MARGIN_RAD,
-        ia.TRIG_EXACT_LIMIT_RAD,
+        np.array(
+            [
+                belt.half_aperture_rad,
+                belt.sensor_box_margin_m,
+                GUARD_M,
+                NEAR_SWITCH_M,
+                ARC_SLACK,
+                ANGLE_MARGIN_RAD,
+                ia.TRIG_EXACT_LIMIT_RAD,
+            ]
+        ),
         reject,
     )
     return reject
