@@ -28,7 +28,7 @@ with the children (child ``n`` cut from parent ``n % P``), so that it may do onc
 what holds for all its children: the pipeline's (:func:`intervals.localize.localize`) tests
 each piece only on the (segment, sensor) pairs its parent's bounds leave
 (:mod:`intervals.sonar.pieces`), which took the test's share of the pass from 4.2 to 3.1 ms an
-epoch on ``hall``, 6.8 to 4.5 on ``office`` and 5.6 to 2.9 on ``apartment`` (9 levels, the
+epoch on ``hall``, 6.8 to 4.6 on ``office`` and 5.6 to 3.4 on ``apartment`` (9 levels, the
 same pieces kept; BENCHMARKS.md, "Tightening at default cost"). Under the caps a call refines
 only the largest boxes (by volume) for which there is room: the set after it holds at most
 ``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they are,
