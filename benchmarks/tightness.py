@@ -10,7 +10,8 @@ scenario's other ``[estimation]`` settings, twice, interleaved scan by scan: wit
 (:mod:`intervals.sonar.contractor`, the default) and without it (not with ``--no-off``); with
 ``--tighten-levels L ...`` once more for each L > 0, the contractor on and the kept boxes
 tightened ``L`` levels below eps (:mod:`intervals.tighten`) then shaved ``--shave-rounds``
-rounds (default 1). For each tracking epoch the
+rounds (default 1), at most ``--tighten-max-tested`` pieces tested an epoch (default: the
+scenario's ``tighten_max_tested``). For each tracking epoch the
 outer set's volume (x, y, heading; m² rad) is compared with the volume of the consistent poses
 in it, estimated by sampling: ``--samples`` poses drawn uniformly in the outer boxes (a box
 chosen with probability proportional to its volume), each judged by the simulator's own sonar
@@ -84,9 +85,11 @@ def plan_rows(
     levels: tuple[int, ...] = (),
     rounds: int = 1,
     off: bool = True,
+    max_tested: int | None = None,
 ) -> list[list[str]]:
     """Table rows for one plan: with the contractor, without it (``off``), and tightened
-    ``L`` levels for each ``L > 0`` of ``levels``."""
+    ``L`` levels for each ``L > 0`` of ``levels`` (at most ``max_tested`` pieces tested an
+    epoch; None: the scenario's budget)."""
     spec = load_scenario(name).with_run(duration_s=duration_s)
     spec = spec.with_estimation(eps_m=EPS_M)
     log = simulate_spec(spec)
@@ -101,6 +104,8 @@ def plan_rows(
             "tighten_levels": level,
             "shave_rounds": rounds,
         }
+        if max_tested is not None:
+            variants[f"on, tighten {level}, shave {rounds}"]["tighten_max_tested"] = max_tested
     trackers = {
         key: IntervalTracker(dataclasses.replace(est.intervals, **change), spec.map.bounds)
         for key, change in variants.items()
@@ -176,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
         "--tighten-levels", type=int, nargs="*", default=[], help="also run tightened, each L"
     )
     parser.add_argument("--shave-rounds", type=int, default=1, help="shaving of that run")
+    parser.add_argument(
+        "--tighten-max-tested", type=int, help="pieces the tightening may test an epoch"
+    )
     parser.add_argument("--no-off", action="store_true", help="not without the contractor")
     parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
     args = parser.parse_args(argv)
@@ -203,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
             tuple(args.tighten_levels),
             args.shave_rounds,
             not args.no_off,
+            args.tighten_max_tested,
         )
         rows += new
         print(markdown_table(header, new).split("\n", 2)[2], flush=True)
@@ -211,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
     levels = " ".join(str(level) for level in args.tighten_levels if level > 0)
     if levels:
         command += f" --tighten-levels {levels} --shave-rounds {args.shave_rounds}"
+        if args.tighten_max_tested is not None:
+            command += f" --tighten-max-tested {args.tighten_max_tested}"
     if args.no_off:
         command += " --no-off"
     body = (

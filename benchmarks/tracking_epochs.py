@@ -13,6 +13,9 @@ reports wall time, for the whole pipeline). Reported per plan: the tracking epoc
 95th percentile and largest CPU time, the mean (x, y) area of the sets, how many sets hold
 the true pose, and a digest of every epoch's set (equal digests: the same boxes).
 
+``--set KEY=VALUE`` (repeatable) replaces a key of the scenarios' ``[estimation]`` table in
+every run (the value read as JSON: ``--set tighten_levels=6``), for both trees.
+
 ``--compare DIR`` runs each plan a second time with another source tree's code (a checkout
 of another commit; the scenario files are always this checkout's), one child process per
 plan and tree, the trees interleaved plan by plan.
@@ -38,8 +41,9 @@ SCENARIO_FOLDER = REPOSITORY / "scenarios" / "builtin"
 PLANS = ("corridor", "office_floor", "symmetric", "hall", "apartment")
 
 
-def child(plan: str, duration_s: float, repeat: int, out: Path) -> int:
-    """Step the tracker on one plan's scans with the code on ``sys.path``; figures to ``out``."""
+def child(plan: str, duration_s: float, repeat: int, out: Path, changes: dict | None = None) -> int:
+    """Step the tracker on one plan's scans with the code on ``sys.path``; figures to ``out``;
+    ``changes``: keys of ``[estimation]`` replaced in the plan's scenario."""
     from intervals.sonar.scan import SonarBelt, SonarScene
     from intervals.tracker import IntervalTracker
     from scenarios.runner import simulate_spec
@@ -52,7 +56,7 @@ def child(plan: str, duration_s: float, repeat: int, out: Path) -> int:
         path = SCENARIO_FOLDER / f"{base}.toml"
         text = path.read_text(encoding="utf-8") + "\n" + extra
         spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
-        return spec.with_run(duration_s=seconds)
+        return spec.with_run(duration_s=seconds).with_estimation(**(changes or {}))
 
     def epochs(spec, rounds: int):
         est = spec.estimation
@@ -98,13 +102,17 @@ def child(plan: str, duration_s: float, repeat: int, out: Path) -> int:
     return 0
 
 
-def run_child(plan: str, duration_s: float, repeat: int, code: Path) -> dict | str:
+def run_child(
+    plan: str, duration_s: float, repeat: int, code: Path, changes: dict | None = None
+) -> dict | str:
     """One plan in a child process importing the code tree ``code``: its figures, or the last
     line of its error."""
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "figures.json"
         command = [sys.executable, __file__, "--child", plan, "--duration", str(duration_s)]
         command += ["--repeat", str(repeat), "--out", str(out)]
+        for key, value in (changes or {}).items():
+            command += ["--set", f"{key}={json.dumps(value)}"]
         done = subprocess.run(
             command,
             env={**os.environ, "PYTHONPATH": str(code)},
@@ -138,11 +146,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each epoch (best kept)")
     parser.add_argument("--compare", type=Path, metavar="DIR", help="another source tree")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="replace an [estimation] key (value as JSON), e.g. tighten_levels=6",
+    )
     parser.add_argument("--child", metavar="PLAN", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    changes = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            parser.error(f"--set {item}: expected KEY=VALUE")
+        changes[key] = json.loads(value)
     if args.child:
-        return child(args.child, args.duration, args.repeat, args.out)
+        return child(args.child, args.duration, args.repeat, args.out, changes)
     if not (args.duration > 0 and args.repeat >= 1):
         parser.error("--duration must be > 0 and --repeat >= 1")
     trees = [REPOSITORY]
@@ -155,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for plan in args.plans or PLANS:
         for tree in trees:
-            got = run_child(plan, args.duration, args.repeat, tree)
+            got = run_child(plan, args.duration, args.repeat, tree, changes)
             if isinstance(got, str):
                 rows.append([plan, labels[tree], got, "-", "-", "-"])
             else:

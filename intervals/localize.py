@@ -31,6 +31,7 @@ from intervals.imagesp import coarsen
 from intervals.sivia import DEFAULT_MAX_BOXES, INSIDE, OUTSIDE, UNDECIDED, cut_width, sivia
 from intervals.sonar import contractor, idle
 from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tighten import MAX_LEVELS, tighten
@@ -87,13 +88,20 @@ def _verdict_codes(out, inside):
     return verdicts
 
 
-def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None):
+def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None, parents=None):
     """``(verdicts (N,) int8, rejects (N,), reject (N, k) bool)``: :func:`box_test`, the number
     of sensors rejecting each box, and which. ``probe (N, 3, 2)``: boxes within ``boxes`` whose
     sensor verdicts hold for them (:func:`intervals.sonar.idle.probes`; None: ``boxes``); the
-    in-room test always sees ``boxes``. ``boxes`` are checked pose boxes (:func:`_pose_boxes`,
-    or SIVIA's boxes), not checked again."""
-    reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
+    in-room test always sees ``boxes``. ``parents (P, 3, 2)`` (without ``inner`` or ``probe``):
+    box ``n`` is a part of ``parents[n % P]``, and the sensors' test is
+    :func:`intervals.sonar.pieces.piece_rejections` (sound, on the pairs the parent leaves).
+    ``boxes`` are checked pose boxes (:func:`_pose_boxes`, or SIVIA's boxes), not checked
+    again."""
+    if parents is not None:
+        reject = piece_rejections(boxes, parents, scan)
+        certain = np.zeros_like(reject)
+    else:
+        reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)
     rejects, out, inside = _sensor_counts(reject, certain, int(q), bool(inner))
     if scan.boundary is not None:
         # the in-room test only matters for the boxes the sensors do not reject
@@ -150,6 +158,14 @@ def _checked_levels(levels) -> int:
     return int(levels)
 
 
+def _checked_tighten_tests(tests) -> int | None:
+    if tests is not None and not (
+        isinstance(tests, (int, np.integer)) and not isinstance(tests, bool) and tests >= 0
+    ):
+        raise IntervalError(f"tighten_max_tested must be None or an integer >= 0, got {tests!r}")
+    return None if tests is None else int(tests)
+
+
 def _checked_whole_boxes(whole_boxes) -> bool:
     if not isinstance(whole_boxes, bool):
         raise IntervalError(f"whole_boxes must be True or False, got {whole_boxes!r}")
@@ -192,6 +208,7 @@ def _pave(
     tighten_levels=0,
     whole=False,
     tests_per_box=TESTS_PER_BOX,
+    tighten_max_tested=None,
 ):
     """SIVIA on ``boxes`` at relaxation ``q``: ``(paving, rejects (Nb,), merged, held (Ni,))``
     with the number of sensors rejecting each boundary box (``merged``: see below), kept from
@@ -229,7 +246,8 @@ def _pave(
     below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
     as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
     count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
-    largest boxes refined first, the rest kept as they are), before any shaving.
+    largest boxes refined first, the rest kept as they are), and within ``tighten_max_tested``
+    tests (None: no limit of its own), before any shaving.
     """
     stored, counts, tested = [], [], [0]
     walls = idle.scan_walls(local) if whole else None
@@ -285,8 +303,9 @@ def _pave(
                 axes[meets] = met_axes
         return verdicts, rejects, axes
 
-    def counted(b):  # the test of the tightening: (kept, counts) as SIVIA's stored boxes
-        verdicts, rejects, reject = _test_and_counts(b, local, q, False)
+    def counted(b, parents):  # the test of the tightening: (kept, counts) as SIVIA's stored
+        # boxes, each piece on the (segment, sensor) pairs its parent leaves
+        verdicts, rejects, reject = _test_and_counts(b, local, q, False, parents=parents)
         keep = verdicts != OUTSIDE
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
@@ -332,6 +351,8 @@ def _pave(
             )
         if tighten_levels and paving.boundary.shape[0]:  # within the budget's tests left
             left = None if max_boxes is None else max(int(tests_per_box * max_boxes) - tested[0], 0)
+            if tighten_max_tested is not None:
+                left = tighten_max_tested if left is None else min(left, tighten_max_tested)
             boundary, rejects, seen = tighten(
                 paving.boundary,
                 rejects,
@@ -415,6 +436,7 @@ def localize(
     contract: bool = True,
     shave_rounds: int = 0,
     tighten_levels: int = 0,
+    tighten_max_tested: int | None = None,
 ) -> Subpaving:
     """Pose set ``{p in initial : at most q sensors inconsistent}`` paved by SIVIA.
 
@@ -440,6 +462,8 @@ def localize(
     dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`). ``tighten_levels``: bisections
     below ``eps`` of the boxes kept, each piece tested and contracted
     (:mod:`intervals.tighten`; 0: none; 9 halves each axis about three times), before shaving.
+    ``tighten_max_tested``: the most pieces the tightening may test (None: no limit but the
+    budget's; under it the largest boxes are refined first, the others kept as they are).
     """
     _checked_q(q)
     _checked_budget(max_boxes)
@@ -461,6 +485,7 @@ def localize(
         _checked_contract(contract),
         _checked_rounds(shave_rounds),
         _checked_levels(tighten_levels),
+        tighten_max_tested=_checked_tighten_tests(tighten_max_tested),
     )[0]
 
 
@@ -503,6 +528,7 @@ def gomne(
     tighten_levels: int = 0,
     whole_boxes: bool = False,
     tests_per_box: float = TESTS_PER_BOX,
+    tighten_max_tested: int | None = None,
 ) -> GomneResult:
     """GOMNE: the smallest ``q <= q_max`` whose q-relaxed set is not empty.
 
@@ -516,7 +542,7 @@ def gomne(
     miss the truth: outliers that happen to agree with some other pose make fewer than the
     actual number of outliers suffice, and ``S_q`` then holds only those other poses.
     ``ray_test``, ``max_boxes``, ``max_kept``, ``splits_per_level``, ``contract``,
-    ``shave_rounds`` and ``tighten_levels``: as in :func:`localize`.
+    ``shave_rounds``, ``tighten_levels`` and ``tighten_max_tested``: as in :func:`localize`.
     ``within`` (None, or at most :data:`MAX_WITHIN_REGIONS` boxes ``(M, 3,
     2)`` known to hold every pose of the set, e.g. the tracker's prediction of each
     component): SIVIA rejects the boxes meeting none of them without testing them, so the
@@ -557,6 +583,7 @@ def gomne(
         _checked_levels(tighten_levels),
         whole_boxes,
         float(tests_per_box),
+        _checked_tighten_tests(tighten_max_tested),
     )
     if widest.is_empty:
         return GomneResult(widest, None, None, merged)
@@ -575,6 +602,7 @@ def gomne(
                 contract=contract,
                 shave_rounds=shave_rounds,
                 tighten_levels=tighten_levels,
+                tighten_max_tested=tighten_max_tested,
             )
             if not minimal.is_empty:
                 break

@@ -243,7 +243,14 @@ class TrackerSettings:
     halved about three times) brings the outer volume from 18 to 40 times the consistent poses'
     volume to 2.1 to 2.6 times (median over the tracking epochs of seven built-in plans;
     ``office_floor`` 73 to 3.1, and 2.0 at 12 levels; ``benchmarks/tightness.py``), for an
-    epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few."""
+    epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few (without
+    the test budget ``tighten_max_tested``; at its default, 9 levels give 2.3 to 2.8 on five plans
+    and 3.2 to 5.5 on ``symmetric``, ``corridor`` and ``office_floor``, tracking CPU p95 7 to 13
+    ms; BENCHMARKS.md, "Tightening at default cost")."""
+    tighten_max_tested: int = bounded(2_000, minimum=0, maximum=10_000_000, integer=True)
+    """With ``tighten_levels``, the most pieces the tightening may test in one epoch (within the
+    budget's tests left): the largest boxes are refined first, the others kept as they are
+    (sound, only coarser), so its cost stays bounded on large sets (:mod:`intervals.tighten`)."""
 
     whole_boxes: bool = True
     """Keep whole the boxes the scan cannot split (``whole_boxes`` of
@@ -477,6 +484,7 @@ class IntervalTracker:
             contract=s.contractor,
             shave_rounds=s.shave_rounds,
             tighten_levels=s.tighten_levels,
+            tighten_max_tested=s.tighten_max_tested,
             max_kept=KEPT_PER_BOX * s.max_boxes,
             splits_per_level=splits_per_level,
             within=within,

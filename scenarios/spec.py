@@ -157,6 +157,7 @@ TRACKER_KEYS = (
     "contractor",
     "shave_rounds",
     "tighten_levels",
+    "tighten_max_tested",
 )
 
 

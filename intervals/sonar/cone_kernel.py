@@ -299,6 +299,33 @@ def _decided(echo, hit, fires, close, sure):
 
 
 @numba.njit(cache=True)
+def sensor_hull(rows):
+    """``(cx, cy, hx, hy)``: centre and half-widths (m) of the hull of the sensor boxes of
+    ``rows (k, SENSOR_COLUMNS)`` (:func:`sensor_rows`)."""
+    sx_lo, sx_hi = rows[0, CX] - rows[0, HX], rows[0, CX] + rows[0, HX]
+    sy_lo, sy_hi = rows[0, CY] - rows[0, HY], rows[0, CY] + rows[0, HY]
+    for i in range(1, rows.shape[0]):
+        sx_lo = _min(sx_lo, rows[i, CX] - rows[i, HX])
+        sx_hi = _max(sx_hi, rows[i, CX] + rows[i, HX])
+        sy_lo = _min(sy_lo, rows[i, CY] - rows[i, HY])
+        sy_hi = _max(sy_hi, rows[i, CY] + rows[i, HY])
+    return (sx_lo + sx_hi) / 2, (sy_lo + sy_hi) / 2, (sx_hi - sx_lo) / 2, (sy_hi - sy_lo) / 2
+
+
+@numba.njit(cache=True)
+def reach_cells(cx, cy, hx, hy, visible, grid_origin, grid_cell_m, nx, ny):
+    """``(ix0, ix1, iy0, iy1)``: the cells of the segment grid (``nx`` by ``ny``) that hold
+    every segment within ``visible`` m of the box ``(c, h)`` (one cell of margin,
+    :mod:`intervals.sonar.segment_grid`); an empty range where the box lies off the grid."""
+    radius = visible + math.hypot(hx, hy)
+    ix0 = max(math.floor((cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
+    ix1 = min(math.floor((cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
+    iy0 = max(math.floor((cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
+    iy1 = min(math.floor((cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+    return ix0, ix1, iy0, iy1
+
+
+@numba.njit(cache=True)
 def sensor_verdicts_into(
     boxes,
     cos_theta,
@@ -367,15 +394,7 @@ def sensor_verdicts_into(
             rows,
         )
         # the hull of the sensor boxes: only segments within reach of it take part
-        sx_lo, sx_hi = rows[0, CX] - rows[0, HX], rows[0, CX] + rows[0, HX]
-        sy_lo, sy_hi = rows[0, CY] - rows[0, HY], rows[0, CY] + rows[0, HY]
-        for i in range(1, k):
-            sx_lo = _min(sx_lo, rows[i, CX] - rows[i, HX])
-            sx_hi = _max(sx_hi, rows[i, CX] + rows[i, HX])
-            sy_lo = _min(sy_lo, rows[i, CY] - rows[i, HY])
-            sy_hi = _max(sy_hi, rows[i, CY] + rows[i, HY])
-        hull_cx, hull_cy = (sx_lo + sx_hi) / 2, (sy_lo + sy_hi) / 2
-        hull_hx, hull_hy = (sx_hi - sx_lo) / 2, (sy_hi - sy_lo) / 2
+        hull_cx, hull_cy, hull_hx, hull_hy = sensor_hull(rows)
         hit[:] = False
         fires[:] = False
         close[:] = False
@@ -391,11 +410,9 @@ def sensor_verdicts_into(
             remaining += 0 if done[i] else 1
         # the segments registered near the hull (intervals.sonar.segment_grid: every segment
         # the gap test below keeps is among them), each once (stamped with the box number)
-        radius = visible + math.hypot(hull_hx, hull_hy)
-        ix0 = max(math.floor((hull_cx - radius - grid_origin[0]) / grid_cell_m) - 1, 0)
-        ix1 = min(math.floor((hull_cx + radius - grid_origin[0]) / grid_cell_m) + 1, nx - 1)
-        iy0 = max(math.floor((hull_cy - radius - grid_origin[1]) / grid_cell_m) - 1, 0)
-        iy1 = min(math.floor((hull_cy + radius - grid_origin[1]) / grid_cell_m) + 1, ny - 1)
+        ix0, ix1, iy0, iy1 = reach_cells(
+            hull_cx, hull_cy, hull_hx, hull_hy, visible, grid_origin, grid_cell_m, nx, ny
+        )
         for ix in range(ix0, ix1 + 1):
             if remaining == 0:
                 break  # every verdict is final: the other segments cannot change it

@@ -90,7 +90,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
         assert wide.paving.volume() <= plain.paving.volume()
 
 
-def _disk(boxes):
+def _disk(boxes, parents=None):
     """``(keep, counts)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
@@ -140,6 +140,34 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     assert np.array_equal(clipped, children[_disk(children)[0]][1:])
 
 
+def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
+    """``tighten_max_tested``: with none the set is the plain paving's; with a few tests it
+    holds at most that many boxes more than the plain set (each tested piece is at most one
+    box), lies between the fully tightened set and the plain one in volume, and keeps every
+    sampled pose that explains all but ``q`` readings."""
+    rng = np.random.default_rng(41)
+    kept = 0
+    for case in range(4):
+        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
+        q = case % 2
+        scan = _with_outliers(scan, rng, q)
+        prior = np.stack([truth - [0.3, 0.3, 0.15], truth + [0.3, 0.3, 0.15]], axis=-1)
+        plain = localize(scan, prior, 0.05, q=q)
+        assert not plain.is_empty
+        full = localize(scan, prior, 0.05, q=q, tighten_levels=9)
+        none = localize(scan, prior, 0.05, q=q, tighten_levels=9, tighten_max_tested=0)
+        assert np.array_equal(none.outer, plain.outer)
+        budget = 8 * plain.outer.shape[0] + 16  # every box refined once, a few twice
+        part = localize(scan, prior, 0.05, q=q, tighten_levels=9, tighten_max_tested=budget)
+        assert part.outer.shape[0] <= plain.outer.shape[0] + budget
+        assert full.volume() <= part.volume() <= plain.volume()
+        poses = _poses_in(plain.outer, truth, rng, 2000)
+        fits = _wrong_readings(poses, scan, params) <= q
+        assert not np.any(fits & ~contains_points(part.outer, poses).any(axis=0))
+        kept += int(np.count_nonzero(fits))
+    assert kept > 200  # the check saw consistent poses
+
+
 def test_bad_levels_are_refused():
     rng = np.random.default_rng(0)
     scan, _, truth = random_scan_case(rng, 0.2, False)
@@ -147,6 +175,9 @@ def test_bad_levels_are_refused():
     for levels in (-1, MAX_LEVELS + 1, 1.5, True):
         with pytest.raises(IntervalError, match="tighten_levels must be"):
             localize(scan, prior, 0.05, tighten_levels=levels)  # type: ignore[arg-type]
+    for tests in (-1, 2.5, True):
+        with pytest.raises(IntervalError, match="tighten_max_tested must be"):
+            localize(scan, prior, 0.05, tighten_levels=3, tighten_max_tested=tests)  # type: ignore[arg-type]
     with pytest.raises(IntervalError, match="tighten: levels must be"):
         tighten(prior[None], np.zeros(1), _disk, None, None, MAX_LEVELS + 1)
     with pytest.raises(IntervalError, match="counts"):

@@ -1,0 +1,83 @@
+"""The cone test of pieces on their parent's pairs (intervals/sonar/pieces.py) against brute force.
+
+Each sensor's rejection of a piece is checked with the simulator's own cone model
+(``tests.helpers.cone_ranges``) and the readings' error bounds, independently of the interval
+code: no sampled pose of a rejected piece (its corners, uniform draws, draws near the truth)
+may explain that reading (an echo ``m``: cone distance ``d <= d_max`` and ``|m - d| <= e_abs +
+e_rel d``; a no-echo reading proving free space: ``d > d_max``). The verdicts are also compared
+with the full test's (:func:`intervals.sonar.cone.sensor_verdicts`), which they follow but need
+not equal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from intervals.boxes import bisect
+from intervals.sonar.cone import sensor_verdicts
+from intervals.sonar.pieces import piece_rejections
+from tests.helpers import cone_ranges, random_scan_case
+from tests.intervals.test_contractor import _sample, _with_outliers
+
+GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
+
+
+def _parents(truth, rng, count):
+    """Pose boxes ``(count, 3, 2)`` of random sizes near the truth (most hold it)."""
+    half = rng.uniform(0.01, 0.2, (count, 3)) * np.array([1.0, 1.0, 0.7])
+    centre = truth + rng.uniform(-1, 1, (count, 3)) * half * 1.5
+    return np.stack([centre - half, centre + half], axis=-1)
+
+
+def _explained(poses, scan, params):
+    """``(N, S, k)`` bool: sample ``s`` of piece ``n`` explains reading ``i`` (module doc)."""
+    d = cone_ranges(poses, scan.segments, params)
+    m = scan.readings_m
+    with np.errstate(invalid="ignore"):  # inf - inf: no echo
+        gap = np.abs(m - d)
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
+    echo = np.isfinite(m)
+    explained = ~echo | ((d <= params.d_max_m) & (gap <= bound))
+    if scan.belt.echoes_never_lost:
+        explained &= echo | (d > params.d_max_m)
+    return explained
+
+
+@pytest.mark.parametrize("gamma", GAMMAS_RAD)
+def test_every_rejection_of_a_piece_is_sound(gamma):
+    """Random rooms, belts, readings (with outliers), with and without free space: a sensor
+    rejects a piece only when no sampled pose of it explains the reading; and the verdicts are
+    nearly all the full test's."""
+    rng = np.random.default_rng(int(gamma * 1e5) + 3)
+    rejected = explained_seen = same = total = 0
+    for case in range(6):
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        scan = _with_outliers(scan, rng, case % 3)
+        parents = _parents(truth, rng, 24)
+        pieces = parents
+        for _ in range(3):  # the tightening's order: piece n of parent n % P
+            pieces = np.concatenate(bisect(pieces, None))
+        reject = piece_rejections(pieces, parents, scan)
+        poses = _sample(pieces, truth, rng, 40)
+        explained = _explained(poses, scan, params)
+        caught = reject[:, None, :] & explained
+        assert not caught.any(), f"case {case}: a sensor rejected a piece with a pose it explains"
+        rejected += int(np.count_nonzero(reject))
+        explained_seen += int(np.count_nonzero(explained.any(axis=1)))
+        full = sensor_verdicts(pieces, scan, inner=False)[0]
+        same += int(np.count_nonzero(reject == full))
+        total += reject.size
+    assert rejected > 100 and explained_seen > 1000  # the check saw both kinds
+    assert same / total > 0.98
+
+
+def test_no_pieces_and_a_piece_that_is_its_parent():
+    """No pieces: an empty verdict array; a parent tested as its own piece: the full test's
+    verdicts on the pairs of that same box."""
+    rng = np.random.default_rng(8)
+    scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=True)
+    parents = _parents(truth, rng, 30)
+    assert piece_rejections(parents[:0], parents, scan).shape == (0, scan.belt.count)
+    full = sensor_verdicts(parents, scan, inner=False)[0]
+    assert np.array_equal(piece_rejections(parents, parents, scan), full)
