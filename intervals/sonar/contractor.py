@@ -107,8 +107,10 @@ SHAVE_FRACTION = 0.25
 HEADING_SLOTS = 4
 """Heading intervals whose offset and polar boxes (:func:`_turned_rows`) :func:`contract_into`
 keeps, so that the boxes of a frontier sharing a heading (the pieces of a strip cut along
-its length; four slots hold all but a few of a corridor epoch's frontiers) compute them once;
-a box's own are the same values, bit for bit, whichever box computed them."""
+its length; four slots hold all but a few of a corridor epoch's frontiers) compute them once.
+A slot is reused only for the same heading bounds and the same cosines and sines of them,
+bit for bit (all that :func:`_turned_rows` reads of a box): the values a box would compute
+alone."""
 
 # columns of the per-sensor scratch rows: offset box O, polar box V, hit box Q, allowed A
 O_XL, O_XH, O_YL, O_YH, V_XL, V_XH, V_YL, V_YH = range(8)
@@ -192,10 +194,14 @@ def _turned_rows(theta_lo, theta_hi, cos_theta, sin_theta, belt, ranges, kind, p
 
 
 @numba.njit(cache=True)
-def _same_bits(a, b):
-    """``a`` and ``b`` are the same float, bit for bit (equal and with the same sign: ``-0.0``
-    and ``0.0`` differ; a NaN matches nothing)."""
-    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
+def _same_key(keys, s, key):
+    """Row ``s`` of ``keys (slots, m)`` holds the floats of ``key (m,)``, bit for bit (equal
+    and with the same sign: ``-0.0`` and ``0.0`` differ; a NaN matches nothing)."""
+    for c in range(key.shape[0]):
+        a, b = keys[s, c], key[c]
+        if not (a == b and math.copysign(1.0, a) == math.copysign(1.0, b)):
+            return False
+    return True
 
 
 @numba.njit(cache=True)
@@ -365,7 +371,8 @@ def contract_into(
     # the rows of the last HEADING_SLOTS heading intervals met (their O_i and V_i computed once;
     # a frontier's boxes share a few headings); a NaN bound matches no heading
     tables = np.empty((HEADING_SLOTS, k, ROW_COLUMNS))
-    slot_lo, slot_hi = np.full(HEADING_SLOTS, np.nan), np.full(HEADING_SLOTS, np.nan)
+    keys = np.full((HEADING_SLOTS, 6), np.nan)  # each slot's heading bounds and their trig
+    key = np.empty(6)
     oldest = 0
     lows, highs, top, bounds = np.empty(k), np.empty(k), np.empty(q + 1), np.empty(4)
     done = np.empty(k, dtype=np.bool_)  # the sensor's A_i can change no more
@@ -383,17 +390,20 @@ def contract_into(
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
         empty = False
-        theta_lo, theta_hi = work[2, 0], work[2, 1]  # the passes leave the heading as it is
+        # everything _turned_rows reads of the box (the passes leave the heading as it is)
+        key[0], key[1] = work[2, 0], work[2, 1]
+        key[2], key[3] = cos_theta[n, 0], cos_theta[n, 1]
+        key[4], key[5] = sin_theta[n, 0], sin_theta[n, 1]
         slot = -1
         for s in range(HEADING_SLOTS):
-            if _same_bits(slot_lo[s], theta_lo) and _same_bits(slot_hi[s], theta_hi):
+            if _same_key(keys, s, key):
                 slot = s
                 break
         if slot < 0:  # a new heading: into the oldest slot
             slot, oldest = oldest, (oldest + 1) % HEADING_SLOTS
             _turned_rows(
-                theta_lo,
-                theta_hi,
+                key[0],
+                key[1],
                 cos_theta[n],
                 sin_theta[n],
                 belt,
@@ -402,7 +412,7 @@ def contract_into(
                 params,
                 tables[slot],
             )
-            slot_lo[slot], slot_hi[slot] = theta_lo, theta_hi
+            keys[slot, :] = key
         rows = tables[slot]
         for _ in range(passes):
             stamp += 1

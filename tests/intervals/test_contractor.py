@@ -145,6 +145,31 @@ def test_boxes_sharing_headings_contract_as_each_box_alone():
     assert moved > 100 and emptied > 100
 
 
+def test_a_heading_slot_is_reused_only_for_the_same_cosines_and_sines(monkeypatch):
+    """Boxes with the same heading bounds but other cosines and sines of them (here nudged by
+    1e-6 for the boxes centred on one side of the truth, as another evaluation of ``cos`` and
+    ``sin`` might differ by ulps) contract with their own: the bytes of one call per box,
+    and not those of the unnudged values."""
+    from intervals.sonar import contractor as contractor_module
+
+    rng = np.random.default_rng(5)
+    scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=False)
+    boxes = boxes_around(truth, rng, 300)
+    boxes[:, 2] = [truth[2] - 0.1, truth[2] + 0.05]
+    plain = contract(boxes, scan, 1)
+
+    def nudged(b):
+        cos, sin = np.cos(b[:, 2]), np.sin(b[:, 2])
+        far = b[:, 0].mean(axis=1) > truth[0]
+        return cos + 1e-6 * far[:, None], sin - 1e-6 * far[:, None]
+
+    monkeypatch.setattr(contractor_module, "heading_trig", nudged)
+    together = contract(boxes, scan, 1)
+    alone = np.concatenate([contract(boxes[n : n + 1], scan, 1) for n in range(len(boxes))])
+    assert together.tobytes() == alone.tobytes()
+    assert together.tobytes() != plain.tobytes()  # the nudge reaches the output
+
+
 def test_impossible_reading_empties_and_no_echo_leaves_the_box():
     """An echo whose interval is empty (no fault-free reading gives it) empties every box at
     q = 0 and not at q = 1; a scan without echoes contracts nothing."""
