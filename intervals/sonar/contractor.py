@@ -104,6 +104,14 @@ Two rounds cost about 7 ms a ``hall`` epoch."""
 SHAVE_FRACTION = 0.25
 """Width of the slice :func:`shave` tests at a face, as a fraction of the box's width there."""
 
+HEADING_SLOTS = 4
+"""Heading intervals whose offset and polar boxes (:func:`_turned_rows`) :func:`contract_into`
+keeps, so that the boxes of a frontier sharing a heading (the pieces of a strip cut along
+its length; four slots hold all but a few of a corridor epoch's frontiers) compute them once.
+A slot is reused only for the same heading bounds and the same cosines and sines of them,
+bit for bit (all that :func:`_turned_rows` reads of a box): the values a box would compute
+alone."""
+
 # columns of the per-sensor scratch rows: offset box O, polar box V, hit box Q, allowed A
 O_XL, O_XH, O_YL, O_YH, V_XL, V_XH, V_YL, V_YH = range(8)
 Q_XL, Q_XH, Q_YL, Q_YH, A_XL, A_XH, A_YL, A_YH = range(8, 16)
@@ -134,11 +142,13 @@ def _scaled(lo, hi, c_min, c_max):
 
 
 @numba.njit(cache=True)
-def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
-    """Offset boxes ``O_i``, polar boxes ``V_i`` and hit boxes ``Q_i`` of every echo sensor for
-    one pose box, into ``rows (k, ROW_COLUMNS)``; ``A_i`` set empty (filled by the segments).
+def _turned_rows(theta_lo, theta_hi, cos_theta, sin_theta, belt, ranges, kind, params, rows):
+    """Offset boxes ``O_i`` and polar boxes ``V_i`` of every echo sensor into ``rows (k,
+    ROW_COLUMNS)``, for the heading interval ``[theta_lo, theta_hi]`` (``cos_theta, sin_theta
+    (2,)``: of its bounds): they depend on the heading alone, not on the box's ``(x, y)``.
     ``params = (half_aperture_rad, margin_m, guard_m, arc_slack, angle_margin_rad,
-    trig_limit_rad)``. Returns the hull ``(x_lo, x_hi, y_lo, y_hi)`` of the ``Q_i``."""
+    trig_limit_rad)``. The rows of the other sensors (no echo, or an empty reading interval)
+    are left as they were: no step reads them."""
     gamma, margin_m, guard_m, arc_slack, angle_margin, trig_limit = (
         params[0],
         params[1],
@@ -147,7 +157,6 @@ def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
         params[4],
         params[5],
     )
-    theta_lo, theta_hi = box[2, 0], box[2, 1]
     width = theta_hi - theta_lo
     trusted = abs(theta_lo) < trig_limit and abs(theta_hi) < trig_limit
     mount_whole = not trusted or width >= 2.0 * np.pi - angle_margin
@@ -156,14 +165,7 @@ def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
     cone_whole = not trusted or cone_width >= 2.0 * np.pi - angle_margin
     cone_half = cone_width >= np.pi - angle_margin
     cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
-    hx_lo, hx_hi, hy_lo, hy_hi = np.inf, -np.inf, np.inf, -np.inf
     for i in range(belt.shape[0]):
-        rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = (
-            np.inf,
-            -np.inf,
-            np.inf,
-            -np.inf,
-        )
         if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
             continue
         # O_i: the mount m_i turned by every heading of the box
@@ -189,7 +191,35 @@ def _forward_rows(box, cos_theta, sin_theta, belt, ranges, kind, params, rows):
         vy_lo, vy_hi = _scaled(lo, hi, s_min, s_max)
         rows[i, V_XL], rows[i, V_XH] = vx_lo - guard_m, vx_hi + guard_m
         rows[i, V_YL], rows[i, V_YH] = vy_lo - guard_m, vy_hi + guard_m
-        # Q_i = box + O_i + V_i, widened
+
+
+@numba.njit(cache=True)
+def _same_key(keys, s, key):
+    """Row ``s`` of ``keys (slots, m)`` holds the floats of ``key (m,)``, bit for bit (equal
+    and with the same sign: ``-0.0`` and ``0.0`` differ; a NaN matches nothing)."""
+    for c in range(key.shape[0]):
+        a, b = keys[s, c], key[c]
+        if not (a == b and math.copysign(1.0, a) == math.copysign(1.0, b)):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _hit_rows(box, ranges, kind, guard_m, rows):
+    """Hit boxes ``Q_i = box + O_i + V_i`` (widened) of every echo sensor of ``rows (k,
+    ROW_COLUMNS)`` (``O_i, V_i`` filled by :func:`_turned_rows` for the heading of ``box``), and
+    every ``A_i`` set empty (filled by the segments). Returns the hull ``(x_lo, x_hi, y_lo,
+    y_hi)`` of the ``Q_i``."""
+    hx_lo, hx_hi, hy_lo, hy_hi = np.inf, -np.inf, np.inf, -np.inf
+    for i in range(rows.shape[0]):
+        rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = (
+            np.inf,
+            -np.inf,
+            np.inf,
+            -np.inf,
+        )
+        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
+            continue
         q_xl = box[0, 0] + rows[i, O_XL] + rows[i, V_XL] - guard_m
         q_xh = box[0, 1] + rows[i, O_XH] + rows[i, V_XH] + guard_m
         q_yl = box[1, 0] + rows[i, O_YL] + rows[i, V_YL] - guard_m
@@ -226,31 +256,35 @@ def _segment_backward(ax, ay, ex, ey, box, rows, done, guard_m):
     for i in range(rows.shape[0]):
         if done[i]:
             continue
-        row = rows[i]
-        if sx_hi < row[Q_XL] or sx_lo > row[Q_XH] or sy_hi < row[Q_YL] or sy_lo > row[Q_YH]:
+        if (
+            sx_hi < rows[i, Q_XL]
+            or sx_lo > rows[i, Q_XH]
+            or sy_hi < rows[i, Q_YL]
+            or sy_lo > rows[i, Q_YH]
+        ):
             continue
-        t0, t1 = _clip_axis(ax, ex, row[Q_XL], row[Q_XH], 0.0, 1.0)
-        t0, t1 = _clip_axis(ay, ey, row[Q_YL], row[Q_YH], t0, t1)
+        t0, t1 = _clip_axis(ax, ex, rows[i, Q_XL], rows[i, Q_XH], 0.0, 1.0)
+        t0, t1 = _clip_axis(ay, ey, rows[i, Q_YL], rows[i, Q_YH], t0, t1)
         if not t0 <= t1:
             continue
         p0x, p0y, p1x, p1y = ax + t0 * ex, ay + t0 * ey, ax + t1 * ex, ay + t1 * ey
-        h_xl = max(min(p0x, p1x) - guard_m, row[Q_XL])
-        h_xh = min(max(p0x, p1x) + guard_m, row[Q_XH])
-        h_yl = max(min(p0y, p1y) - guard_m, row[Q_YL])
-        h_yh = min(max(p0y, p1y) + guard_m, row[Q_YH])
+        h_xl = max(min(p0x, p1x) - guard_m, rows[i, Q_XL])
+        h_xh = min(max(p0x, p1x) + guard_m, rows[i, Q_XH])
+        h_yl = max(min(p0y, p1y) - guard_m, rows[i, Q_YL])
+        h_yh = min(max(p0y, p1y) + guard_m, rows[i, Q_YH])
         # backward: (x, y) in H - V - O, within the box
-        x_lo = max(h_xl - row[V_XH] - row[O_XH] - guard_m, box[0, 0])
-        x_hi = min(h_xh - row[V_XL] - row[O_XL] + guard_m, box[0, 1])
-        y_lo = max(h_yl - row[V_YH] - row[O_YH] - guard_m, box[1, 0])
-        y_hi = min(h_yh - row[V_YL] - row[O_YL] + guard_m, box[1, 1])
+        x_lo = max(h_xl - rows[i, V_XH] - rows[i, O_XH] - guard_m, box[0, 0])
+        x_hi = min(h_xh - rows[i, V_XL] - rows[i, O_XL] + guard_m, box[0, 1])
+        y_lo = max(h_yl - rows[i, V_YH] - rows[i, O_YH] - guard_m, box[1, 0])
+        y_hi = min(h_yh - rows[i, V_YL] - rows[i, O_YL] + guard_m, box[1, 1])
         if x_lo <= x_hi and y_lo <= y_hi:
-            row[A_XL], row[A_XH] = min(row[A_XL], x_lo), max(row[A_XH], x_hi)
-            row[A_YL], row[A_YH] = min(row[A_YL], y_lo), max(row[A_YH], y_hi)
+            rows[i, A_XL], rows[i, A_XH] = min(rows[i, A_XL], x_lo), max(rows[i, A_XH], x_hi)
+            rows[i, A_YL], rows[i, A_YH] = min(rows[i, A_YL], y_lo), max(rows[i, A_YH], y_hi)
             if (
-                row[A_XL] <= box[0, 0]
-                and row[A_XH] >= box[0, 1]
-                and row[A_YL] <= box[1, 0]
-                and row[A_YH] >= box[1, 1]
+                rows[i, A_XL] <= box[0, 0]
+                and rows[i, A_XH] >= box[0, 1]
+                and rows[i, A_YL] <= box[1, 0]
+                and rows[i, A_YH] >= box[1, 1]
             ):
                 done[i] = True
                 marked += 1
@@ -278,13 +312,13 @@ def _largest(values, q, top):
 
 
 @numba.njit(cache=True)
-def _relaxed_bounds(rows, kind, box, q, lows, highs, top):
-    """The q-relaxed ``(x_lo, x_hi, y_lo, y_hi)``: per axis the ``(q + 1)``-th largest lower
-    bound and the ``(q + 1)``-th smallest upper bound of the sensors' allowed boxes (a sensor
-    without an echo allows the whole box); ``lows, highs (k,)``, ``top (q + 1,)``: scratch (the
-    upper bounds negated, so that the smallest is the largest of their negatives, exactly)."""
+def _relaxed_bounds(rows, kind, box, q, lows, highs, top, out):
+    """The q-relaxed ``(x_lo, x_hi, y_lo, y_hi)`` into ``out (4,)``: per axis the ``(q + 1)``-th
+    largest lower bound and the ``(q + 1)``-th smallest upper bound of the sensors' allowed
+    boxes (a sensor without an echo allows the whole box); ``lows, highs (k,)``, ``top (q +
+    1,)``: scratch (the upper bounds negated, so that the smallest is the largest of their
+    negatives, exactly). Returns ``out``."""
     k = rows.shape[0]
-    out = np.empty(4)
     for axis in range(2):
         if q >= k:
             out[2 * axis], out[2 * axis + 1] = box[axis, 0], box[axis, 1]
@@ -330,12 +364,17 @@ def contract_into(
     in the cells the hull of the hit boxes meets, each skipped unless its bounding box meets
     that hull;
     ``ranges (k, 2)``, ``kind (k,)``: the scan's reading intervals; ``belt (k, 8)``: the belt's
-    kernel table; ``params``: see :func:`_forward_rows`; ``q``: the relaxation; ``passes``:
+    kernel table; ``params``: see :func:`_turned_rows`; ``q``: the relaxation; ``passes``:
     forward-backward passes. An empty result row is all NaN.
     """
     k = belt.shape[0]
-    rows = np.empty((k, ROW_COLUMNS))
-    lows, highs, top = np.empty(k), np.empty(k), np.empty(q + 1)
+    # the rows of the last HEADING_SLOTS heading intervals met (their O_i and V_i computed once;
+    # a frontier's boxes share a few headings); a NaN bound matches no heading
+    tables = np.empty((HEADING_SLOTS, k, ROW_COLUMNS))
+    keys = np.full((HEADING_SLOTS, 6), np.nan)  # each slot's heading bounds and their trig
+    key = np.empty(6)
+    oldest = 0
+    lows, highs, top, bounds = np.empty(k), np.empty(k), np.empty(q + 1), np.empty(4)
     done = np.empty(k, dtype=np.bool_)  # the sensor's A_i can change no more
     guard_m = params[2]
     echoes = 0
@@ -351,11 +390,33 @@ def contract_into(
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
         empty = False
+        # everything _turned_rows reads of the box (the passes leave the heading as it is)
+        key[0], key[1] = work[2, 0], work[2, 1]
+        key[2], key[3] = cos_theta[n, 0], cos_theta[n, 1]
+        key[4], key[5] = sin_theta[n, 0], sin_theta[n, 1]
+        slot = -1
+        for s in range(HEADING_SLOTS):
+            if _same_key(keys, s, key):
+                slot = s
+                break
+        if slot < 0:  # a new heading: into the oldest slot
+            slot, oldest = oldest, (oldest + 1) % HEADING_SLOTS
+            _turned_rows(
+                key[0],
+                key[1],
+                cos_theta[n],
+                sin_theta[n],
+                belt,
+                ranges,
+                kind,
+                params,
+                tables[slot],
+            )
+            keys[slot, :] = key
+        rows = tables[slot]
         for _ in range(passes):
             stamp += 1
-            hx_lo, hx_hi, hy_lo, hy_hi = _forward_rows(
-                work, cos_theta[n], sin_theta[n], belt, ranges, kind, params, rows
-            )
+            hx_lo, hx_hi, hy_lo, hy_hi = _hit_rows(work, ranges, kind, guard_m, rows)
             # sensors that can still contract: the echoes (A_i starts empty); once at most q
             # remain, no face can move (the (q + 1)-th bound is the box's), so stop early
             # (an empty reading interval counts as remaining: it never allows the whole box)
@@ -392,7 +453,7 @@ def contract_into(
                         remaining -= _segment_backward(
                             ax, ay, bx - ax, by - ay, work, rows, done, guard_m
                         )
-            b = _relaxed_bounds(rows, kind, work, q, lows, highs, top)
+            b = _relaxed_bounds(rows, kind, work, q, lows, highs, top, bounds)
             if not (b[0] <= b[1] and b[2] <= b[3]):
                 empty = True
                 break

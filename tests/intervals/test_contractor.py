@@ -19,7 +19,7 @@ from intervals.boxes import clip_to_boxes, meets_any_box, volume
 from intervals.errors import IntervalError
 from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
-from intervals.sonar.contractor import contract, shave
+from intervals.sonar.contractor import HEADING_SLOTS, contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
 from tests.helpers import DEFAULT_BELT, boxes_around, cone_ranges, random_scan_case
@@ -118,6 +118,56 @@ def test_truth_kept_and_boxes_contracted_on_the_default_belt():
         area = np.prod(boxes[:, :2, 1] - boxes[:, :2, 0], axis=1)
         ratios.append(np.prod(out[:, :2, 1] - out[:, :2, 0], axis=1) / area)
     assert np.mean(ratios) < 0.7
+
+
+def test_boxes_sharing_headings_contract_as_each_box_alone():
+    """The offset and polar boxes kept per heading interval (``HEADING_SLOTS`` of them) are
+    those each box computes alone: many boxes over more distinct headings than slots, in a
+    random order (slots evicted and met again), pairs of headings with the same lower bound
+    and bounds at -0.0 and 0.0 among them, give the bytes of one call per box; and the scans
+    contract some boxes and empty others."""
+    rng = np.random.default_rng(11)
+    moved = emptied = 0
+    for case in range(6):
+        scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=bool(case % 2))
+        boxes = boxes_around(truth, rng, 400)
+        starts = truth[2] + rng.uniform(-0.3, 0.05, HEADING_SLOTS)
+        headings = [[s, s + w] for s in starts for w in rng.uniform(0.01, 0.3, 2)]  # lo shared
+        headings += [[-0.0, 0.1], [0.0, 0.1], [-0.1, -0.0], [-0.1, 0.0]]
+        boxes[:, 2] = np.array(headings)[rng.integers(0, len(headings), boxes.shape[0])]
+        q = case % 2
+        together = contract(boxes, scan, q)
+        alone = np.concatenate([contract(boxes[n : n + 1], scan, q) for n in range(len(boxes))])
+        assert together.tobytes() == alone.tobytes()
+        full = ~np.isnan(together).any(axis=(1, 2))
+        emptied += int(np.count_nonzero(~full))
+        moved += int(np.count_nonzero(np.any(together[full] != boxes[full], axis=(1, 2))))
+    assert moved > 100 and emptied > 100
+
+
+def test_a_heading_slot_is_reused_only_for_the_same_cosines_and_sines(monkeypatch):
+    """Boxes with the same heading bounds but other cosines and sines of them (here nudged by
+    1e-6 for the boxes centred on one side of the truth, as another evaluation of ``cos`` and
+    ``sin`` might differ by ulps) contract with their own: the bytes of one call per box,
+    and not those of the unnudged values."""
+    from intervals.sonar import contractor as contractor_module
+
+    rng = np.random.default_rng(5)
+    scan, _, truth = random_scan_case(rng, np.deg2rad(12.5), echoes_never_lost=False)
+    boxes = boxes_around(truth, rng, 300)
+    boxes[:, 2] = [truth[2] - 0.1, truth[2] + 0.05]
+    plain = contract(boxes, scan, 1)
+
+    def nudged(b):
+        cos, sin = np.cos(b[:, 2]), np.sin(b[:, 2])
+        far = b[:, 0].mean(axis=1) > truth[0]
+        return cos + 1e-6 * far[:, None], sin - 1e-6 * far[:, None]
+
+    monkeypatch.setattr(contractor_module, "heading_trig", nudged)
+    together = contract(boxes, scan, 1)
+    alone = np.concatenate([contract(boxes[n : n + 1], scan, 1) for n in range(len(boxes))])
+    assert together.tobytes() == alone.tobytes()
+    assert together.tobytes() != plain.tobytes()  # the nudge reaches the output
 
 
 def test_impossible_reading_empties_and_no_echo_leaves_the_box():
