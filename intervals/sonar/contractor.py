@@ -41,9 +41,10 @@ one allows the whole box already, so no ``(q + 1)``-th bound can move: the box i
 it is, which is always sound).
 
 Cost. Each segment is checked against the hull of the ``Q_i`` by its bounding box (the scan's
-segments are those within reach of the paved boxes), then against each ``Q_i``: measured
-on 20 000 boxes round a ``hall`` pose, 6 to 8 us a box against the box test's 12 (a loaded
-machine).
+segments are those within reach of the paved boxes), then against each ``Q_i``; the
+offset and polar boxes, which depend on the heading only, are kept for the last
+:data:`HEADING_SLOTS` heading intervals. Measured on a ``corridor`` tracking frontier of
+3 516 boxes: 1.7 ms CPU, about 0.5 us a box (BENCHMARKS.md, "The corridor's tracking tail").
 
 Shaving (:func:`shave`): the heading, which this chain does not narrow, and the faces the
 free-space part of the cone test can cut, are narrowed after SIVIA by testing thin slices at
