@@ -12,7 +12,11 @@ Every output of the CLI goes through these helpers:
 - no destination may be an input of the run (:func:`check_not_input`);
 - temporary names carry the writing process's id (``.<name>.<pid>-<random>.part``): the
   next write to the same destination removes those a killed process (``kill -9``, a power
-  cut) left behind, and leaves alone those of a process still running.
+  cut) left behind, and leaves alone those of a process still running;
+- a stop signal (Ctrl-C, SIGTERM, SIGHUP) is held back while a temporary is created and
+  recorded for removal, and while the outputs are moved into place (:func:`signals_held`):
+  one that arrives then takes effect just after, so that no temporary is left unrecorded
+  and no destination is left half swapped.
 
 Outputs get the usual permissions of a new file (``0o666``) or folder (``0o777``) less the
 process's umask, not the private ones of the temporary names.
@@ -24,7 +28,9 @@ import contextlib
 import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -40,6 +46,32 @@ MARKER_TEXT = "written by robotsim reproduce; robotsim may replace this folder a
 #: Suffixes of the temporary names beside a destination (new output; previous folder).
 PART_SUFFIX = ".part"
 OLD_SUFFIX = ".old"
+
+#: The signals whose handlers raise in the CLI (Ctrl-C and its stop signals).
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold back :data:`HELD_SIGNALS` while the block runs: their handlers are swapped for
+    one that notes the signal, and a signal noted is raised again once the previous handlers
+    are back. (Masking the signal would not do: the kernel hands a process's signal to any
+    thread that does not mask it, numpy's among them, and Python runs the handler anyway.)
+    Only the main thread runs handlers and may set them: elsewhere a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    previous = {
+        signum: signal.signal(signum, lambda n, _: arrived.append(n)) for signum in HELD_SIGNALS
+    }
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        for number in dict.fromkeys(arrived):
+            signal.raise_signal(number)
 
 
 def _umask() -> int:
@@ -211,14 +243,17 @@ def atomic_paths(*paths: str | Path) -> Iterator[tuple[Path, ...]]:
     temporaries: list[Path] = []
     try:
         try:
-            temporaries.extend(_temporary_file(path) for path in destinations)
+            for path in destinations:
+                with signals_held():  # a stop here must not leave a temporary unrecorded
+                    temporaries.append(_temporary_file(path))
             yield tuple(temporaries)
             mode = FILE_MODE & ~_umask()
             for tmp in temporaries:
                 os.chmod(tmp, mode)
         except OSError as exc:
             raise _naming(exc, temporaries, destinations) from exc
-        _move_all(temporaries, destinations)
+        with signals_held():
+            _move_all(temporaries, destinations)
     finally:
         for tmp in temporaries:
             tmp.unlink(missing_ok=True)
@@ -298,8 +333,11 @@ def atomic_directory(path: str | Path) -> Iterator[Path]:
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path)
     prefix = _temporary_prefix(path)
-    tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=PART_SUFFIX, dir=path.parent))
+    made: list[Path] = []  # the temporary folder, once made
     try:
+        with signals_held():  # a stop here must not leave the folder unrecorded
+            made.append(Path(tempfile.mkdtemp(prefix=prefix, suffix=PART_SUFFIX, dir=path.parent)))
+        tmp = made[0]
         try:
             yield tmp
             write_bytes(tmp / MARKER, MARKER_TEXT.encode("utf-8"))
@@ -309,19 +347,27 @@ def atomic_directory(path: str | Path) -> Iterator[Path]:
         if reason is not None:
             raise FileExistsError(reason)
         os.chmod(tmp, FOLDER_MODE & ~_umask())
-        old = None
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=prefix, suffix=OLD_SUFFIX, dir=path.parent))
-            os.replace(path, old / "previous")
-        try:
-            os.replace(tmp, path)
-        except BaseException:
-            if old is not None:
-                os.replace(old / "previous", path)
-            raise
-        finally:
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
+        with signals_held():
+            _swap_folder(tmp, path, prefix)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        for folder in made:
+            shutil.rmtree(folder, ignore_errors=True)
         raise
+
+
+def _swap_folder(new: Path, path: Path, prefix: str) -> None:
+    """Move the folder ``new`` onto ``path``; the folder there before (if any) is set aside
+    first, put back if the move fails, and removed once it succeeded."""
+    old = None
+    if path.exists():
+        old = Path(tempfile.mkdtemp(prefix=prefix, suffix=OLD_SUFFIX, dir=path.parent))
+        os.replace(path, old / "previous")
+    try:
+        os.replace(new, path)
+    except BaseException:
+        if old is not None:
+            os.replace(old / "previous", path)
+        raise
+    finally:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import os
+import signal
 import stat
 import subprocess
 import sys
+import tempfile
 
 import pytest
 
@@ -233,3 +235,93 @@ def test_a_temporary_that_cannot_be_created_is_reported_under_the_users_path(tmp
         pass
     assert failure.value.filename == "/proc/x.json"
     assert not any(tmp_path.iterdir())
+
+
+class Stop(Exception):
+    """What the CLI's stop handler raises, here raised by this test's handler."""
+
+
+@pytest.fixture
+def sigterm_raises():
+    """SIGTERM raises :class:`Stop` while the test runs (as the CLI's handler does)."""
+
+    def stop(signum, frame):
+        raise Stop(signum)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    yield
+    signal.signal(signal.SIGTERM, previous)
+
+
+def signal_self_after(function):
+    """``function`` that sends this process SIGTERM once its work is done: the signal
+    arrives at the worst moment, with the temporary made and not yet recorded."""
+
+    def signalled(*args, **kwargs):
+        made = function(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return made
+
+    return signalled
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_a_stop_while_a_temporary_is_made_leaves_no_temporary(
+    tmp_path, monkeypatch, sigterm_raises, which
+):
+    """Before, a SIGTERM between ``mkstemp`` and the list of temporaries left a .part
+    behind (seen in CI: the second destination's). Now it is delivered once recorded."""
+    made = []
+    real = outputs.tempfile.mkstemp
+
+    def counted(*args, **kwargs):
+        made.append(None)
+        fd_name = real(*args, **kwargs)
+        if len(made) == which + 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return fd_name
+
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", counted)
+    first, second = tmp_path / "one.rrd", tmp_path / "two.json"
+    second.write_text("previous")
+    with pytest.raises(Stop), outputs.atomic_paths(first, second) as temporaries:
+        for tmp in temporaries:
+            tmp.write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["two.json"]
+    assert second.read_text() == "previous"
+
+
+def test_a_stop_while_moving_into_place_lands_all_or_nothing(tmp_path, monkeypatch, sigterm_raises):
+    """A SIGTERM while the outputs are moved (here after the first move) takes effect once
+    every output is in place and the previous file's backup removed: no half swap."""
+    monkeypatch.setattr(outputs.os, "replace", signal_self_after(os.replace))
+    first, second = tmp_path / "one.rrd", tmp_path / "two.json"
+    second.write_text("previous")
+    with pytest.raises(Stop), outputs.atomic_paths(first, second) as (tmp_first, tmp_second):
+        tmp_first.write_text("1")
+        tmp_second.write_text("2")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one.rrd", "two.json"]
+    assert first.read_text() == "1" and second.read_text() == "2"
+
+
+def test_a_stop_while_a_folder_is_swapped_keeps_a_whole_folder(
+    tmp_path, monkeypatch, sigterm_raises
+):
+    """A SIGTERM just after the previous folder was set aside (before, it stayed in a
+    ``.old`` folder that the next write removed, and ``out`` was missing): now the swap
+    completes first, and no temporary folder is left."""
+    out = tmp_path / "out"
+    with outputs.atomic_directory(out) as folder:
+        (folder / "a.txt").write_text("first")
+    monkeypatch.setattr(outputs.os, "replace", signal_self_after(os.replace))
+    with pytest.raises(Stop), outputs.atomic_directory(out) as folder:
+        (folder / "b.txt").write_text("second")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert sorted(p.name for p in out.iterdir()) == [outputs.MARKER, "b.txt"]
+
+
+def test_a_stop_while_a_temporary_folder_is_made_leaves_none(tmp_path, monkeypatch, sigterm_raises):
+    monkeypatch.setattr(outputs.tempfile, "mkdtemp", signal_self_after(tempfile.mkdtemp))
+    with pytest.raises(Stop), outputs.atomic_directory(tmp_path / "out") as folder:
+        (folder / "a.txt").write_text("never")
+    assert list(tmp_path.iterdir()) == []
