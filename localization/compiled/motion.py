@@ -1,6 +1,7 @@
 """The motion models of :mod:`localization.motion_models` for one state (numba): THE formulas.
 
-Each model of paper 001 (CV, CTRV, CTRA, CCA) is written once, here, as a per-point kernel,
+Each model of paper 001 (CV, CTRV, CTRA, CCA) is written once, here, as a scalar function of
+the state's entries (``*_scalar``, inlined: the one source per formula), wrapped by a per-point kernel,
 and everything else is generated from it:
 
 - ``*_point(x (n,), args (1,) = (dt_s,), out (n,))``: the transition of one state, written
@@ -99,83 +100,104 @@ def _identity_point(out) -> None:
         out[j, j] = 1.0
 
 
-@numba.njit(cache=True)
-def _along_arc_point(x, theta, length, turn, out) -> None:
-    """``x (n,)`` with its position moved along a circular arc and its heading turned, into ``out (n,)``.
+@numba.njit(cache=True, inline="always")
+def arc_scalar(px, py, theta, length, turn):
+    """The pose ``(x, y, theta)`` after a circular arc from ``(px, py)`` at heading ``theta``
+    (rad) of the signed ``length`` (m) turning by ``turn`` (rad): THE arc formula.
 
-    The arc starts at heading ``theta``, has the signed ``length`` (m) and turns by ``turn``
-    (rad). Its displacement ``length (M_0^c, M_0^s)(turn)`` in the frame of ``theta`` is the
-    chord, ``(M_0^c, M_0^s)(u) = sinc(u/2) (cos, sin)(u/2)``, so in the world frame it is
+    Its displacement ``length (M_0^c, M_0^s)(turn)`` in the frame of ``theta`` is the chord,
+    ``(M_0^c, M_0^s)(u) = sinc(u/2) (cos, sin)(u/2)``, so in the world frame it is
     ``length sinc(turn/2) (cos, sin)(theta + turn/2)``, ``sinc(0) = 1``: no turn gives the
     straight line bit for bit. (Until session 24 ``sinc(h)`` was ``sin(a)/a`` with ``a =
     hypot(h, 1e-300)``, without a branch; ``a`` is ``|h|`` there unless ``|h|`` is below about
     1e-290, where both ratios are exactly 1, so the two agree bit for bit, the branch without
     the ``hypot`` call.) The heading is wrapped to ``[-pi, pi)``.
     """
-    out[:] = x
     half = 0.5 * turn
     chord = (math.sin(half) / half if half != 0.0 else 1.0) * length
     direction = theta + half
-    out[0] = x[0] + chord * math.cos(direction)
-    out[1] = x[1] + chord * math.sin(direction)
-    out[2] = wrap_angle(theta + turn)
+    return (
+        px + chord * math.cos(direction),
+        py + chord * math.sin(direction),
+        wrap_angle(theta + turn),
+    )
 
 
-@numba.njit(cache=True)
-def cv_point(x, args, out) -> None:
-    """CV, paper 001 eq. 3: ``x + vx dt``, ``y + vy dt``; ``x (4,) = (x, y, vx, vy)``,
-    ``args = (dt_s,)``, into ``out (4,)``."""
-    dt = args[0]
-    out[:] = x
-    out[0] = x[0] + x[2] * dt
-    out[1] = x[1] + x[3] * dt
+@numba.njit(cache=True, inline="always")
+def cv_scalar(px, py, vx, vy, dt):
+    """CV, paper 001 eq. 3: the position ``(x + vx dt, y + vy dt)`` (m) over ``dt`` (s)."""
+    return px + vx * dt, py + vy * dt
 
 
-@numba.njit(cache=True)
-def ctrv_point(x, args, out) -> None:
-    """CTRV, paper 001 eq. 5 (corrected): an arc of length ``v T`` turning by ``omega T``
-    (:func:`_along_arc_point`); ``x (5,) = (x, y, theta, v, omega)``, ``args = (dt_s,)``, into
-    ``out (5,)``."""
-    dt = args[0]
-    _along_arc_point(x, x[2], x[3] * dt, x[4] * dt, out)
+@numba.njit(cache=True, inline="always")
+def ctrv_scalar(px, py, theta, v, omega, dt):
+    """CTRV, paper 001 eq. 5 (corrected): the pose ``(x, y, theta)`` after an arc of length
+    ``v dt`` turning by ``omega dt`` (:func:`arc_scalar`); ``v`` and ``omega`` are constant."""
+    return arc_scalar(px, py, theta, v * dt, omega * dt)
 
 
-@numba.njit(cache=True)
-def ctra_point(x, args, out) -> None:
-    """CTRA, paper 001 eq. 7-9; ``x (6,) = (x, y, theta, v, a, omega)``, ``args = (dt_s,)``,
-    into ``out (6,)``.
+@numba.njit(cache=True, inline="always")
+def ctra_scalar(px, py, theta, v, accel, omega, dt):
+    """CTRA, paper 001 eq. 7-9: ``(x, y, theta, v)`` over ``dt`` (s); ``a`` and ``omega`` constant.
 
     The displacement in the frame of the initial heading (eq. 5, 8-9 rewritten) is
     ``int_0^T (v + a t) (cos, sin)(omega t) dt = v T (M0c, M0s) + a T^2 (M1c, M1s)`` of the
     turned angle ``u = omega T`` (:func:`trig_moments_point`).
     """
-    dt = args[0]
-    theta, v, accel, omega = x[2], x[3], x[4], x[5]
     u = omega * dt
     mc0, mc1, _, ms0, ms1, _ = trig_moments_point(u)
     forward = v * dt * mc0 + accel * (dt * dt) * mc1
     left = v * dt * ms0 + accel * (dt * dt) * ms1
     c, s = math.cos(theta), math.sin(theta)
+    return (
+        px + (c * forward - s * left),
+        py + (s * forward + c * left),
+        wrap_angle(theta + u),
+        v + accel * dt,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def cca_scalar(px, py, theta, v, a, c, dt):
+    """CCA, the re-derived closed form of paper 001 eq. 17: ``(x, y, theta, v)`` over ``dt`` (s).
+
+    With ``s = v T + a T^2 / 2``: a circular arc of length ``s`` turning by ``c s``
+    (:func:`arc_scalar`), ``v += a T``; ``a`` and ``c`` are constant.
+    """
+    s = v * dt + 0.5 * a * (dt * dt)
+    px1, py1, theta1 = arc_scalar(px, py, theta, s, c * s)
+    return px1, py1, theta1, v + a * dt
+
+
+@numba.njit(cache=True)
+def cv_point(x, args, out) -> None:
+    """CV (:func:`cv_scalar`); ``x (4,) = (x, y, vx, vy)``, ``args = (dt_s,)``, into ``out (4,)``."""
     out[:] = x
-    out[0] = x[0] + (c * forward - s * left)
-    out[1] = x[1] + (s * forward + c * left)
-    out[2] = wrap_angle(theta + u)
-    out[3] = v + accel * dt
+    out[0], out[1] = cv_scalar(x[0], x[1], x[2], x[3], args[0])
+
+
+@numba.njit(cache=True)
+def ctrv_point(x, args, out) -> None:
+    """CTRV (:func:`ctrv_scalar`); ``x (5,) = (x, y, theta, v, omega)``, ``args = (dt_s,)``,
+    into ``out (5,)``."""
+    out[:] = x
+    out[0], out[1], out[2] = ctrv_scalar(x[0], x[1], x[2], x[3], x[4], args[0])
+
+
+@numba.njit(cache=True)
+def ctra_point(x, args, out) -> None:
+    """CTRA (:func:`ctra_scalar`); ``x (6,) = (x, y, theta, v, a, omega)``, ``args = (dt_s,)``,
+    into ``out (6,)``."""
+    out[:] = x
+    out[0], out[1], out[2], out[3] = ctra_scalar(x[0], x[1], x[2], x[3], x[4], x[5], args[0])
 
 
 @numba.njit(cache=True)
 def cca_point(x, args, out) -> None:
-    """CCA (constant curvature and acceleration), the re-derived closed form of paper 001
-    eq. 17; ``x (6,) = (x, y, theta, v, a, c)``, ``args = (dt_s,)``, into ``out (6,)``.
-
-    With ``s = v T + a T^2 / 2``: a circular arc of length ``s`` turning by ``c s``
-    (:func:`_along_arc_point`), ``v += a T``; ``a`` and ``c`` are constant.
-    """
-    dt = args[0]
-    v, a, c = x[3], x[4], x[5]
-    s = v * dt + 0.5 * a * (dt * dt)
-    _along_arc_point(x, x[2], s, c * s, out)
-    out[3] = v + a * dt
+    """CCA (:func:`cca_scalar`); ``x (6,) = (x, y, theta, v, a, c)``, ``args = (dt_s,)``,
+    into ``out (6,)``."""
+    out[:] = x
+    out[0], out[1], out[2], out[3] = cca_scalar(x[0], x[1], x[2], x[3], x[4], x[5], args[0])
 
 
 @numba.njit(cache=True)
