@@ -7,10 +7,12 @@ process loads it in milliseconds. A fresh install has no cache, so without this 
 install (``.ci/run`` does); it takes each built-in path a few steps:
 
 - ``run``: the default scenario for :data:`RUN_S` with each dead-reckoning filter, the IMAGESP
-  tracker and the ray test (:data:`RUN_VARIANTS`), and for :data:`MCL_RUN_S` with the particle
-  filter: the dead-reckoning step, the sonar box tests, the in-room test, the ray kernels and
-  the MCL kernels (``localization.compiled.mcl``, the expected ranges of
-  ``scenarios.mcl_ranges``);
+  tracker, the ray test and the tightening pass (:data:`RUN_VARIANTS`), and for
+  :data:`MCL_RUN_S` with the particle filter: the dead-reckoning step, the sonar box tests,
+  the in-room test, the ray kernels, the tightening's piece test and the MCL kernels
+  (``localization.compiled.mcl``, the expected ranges of ``scenarios.mcl_ranges``); and
+  :data:`JOIN_MAP` for :data:`RUN_S`, whose large first set makes SIVIA join boxes back
+  across their idle axes (``intervals.sivia``), which the default room's never does;
 - ``filters``: one predict and one update of the UKF (additive and augmented noise) and of
   the EKF for every motion model of :data:`localization.motion_models.MODELS`, with the GPS
   and the pose measurement models: the compiled filter steps.
@@ -49,7 +51,10 @@ RUN_VARIANTS: tuple[dict[str, object], ...] = (
     {"filter": "iekf"},
     {"tracker": "imagesp"},
     {"ray_test": True},
+    {"tighten_levels": 3},
 )
+#: The built-in scenario whose first epoch takes the idle join (a large open hall).
+JOIN_MAP = "big_hall"
 #: Simulated seconds of the default scenario's run with the particle filter: long enough for
 #: the robot to move past ``update_min_d``, so that the motion model is sampled (1 s is not).
 MCL_RUN_S = 3.0
@@ -57,7 +62,7 @@ MCL_RUN_S = 3.0
 
 def warm_runs() -> None:
     """The default scenario for :data:`RUN_S` with each of :data:`RUN_VARIANTS`, and for
-    :data:`MCL_RUN_S` with the particle filter."""
+    :data:`MCL_RUN_S` with the particle filter; :data:`JOIN_MAP` for :data:`RUN_S`."""
     from scenarios.catalog import DEFAULT_MAP
     from scenarios.runner import run_scenario
     from scenarios.spec import load_scenario
@@ -66,6 +71,7 @@ def warm_runs() -> None:
     for variant in RUN_VARIANTS:
         run_scenario(spec.with_estimation(**variant))
     run_scenario(spec.with_estimation(estimator="mcl").with_run(duration_s=MCL_RUN_S))
+    run_scenario(load_scenario(JOIN_MAP).with_run(duration_s=RUN_S))
 
 
 def warm_filters() -> None:

@@ -72,6 +72,13 @@ def test_after_the_warm_up_a_run_compiles_nothing(tmp_path):
         ".spec.load_scenario('office').with_estimation(estimator='mcl').with_run(duration_s=8))"
     )
     assert compiled_by(mcl, cache, tmp_path) == []
+    # the idle join of a large hall's first set, and the tightening's piece test
+    join_and_pieces = (
+        "[__import__('scenarios.runner').runner.run_scenario(__import__('scenarios.spec')"
+        ".spec.load_scenario(name).with_estimation(tighten_levels=6).with_run(duration_s=2)) "
+        "for name in ('big_hall', 'corridor')]"
+    )
+    assert compiled_by(join_and_pieces, cache, tmp_path) == []
 
 
 @pytest.mark.slow
