@@ -40,6 +40,7 @@ from typing import Any, NamedTuple, NoReturn
 
 from robotsim.errors import RobotsimError
 from scenarios.errors import ScenarioError
+from scenarios.outputs import STOP_SIGNALS
 
 #: The errors that are a user's to fix: printed on one line, exit status 2.
 USER_ERRORS = (ScenarioError, RobotsimError)
@@ -47,9 +48,6 @@ EXIT_USER_ERROR = 2
 #: A defect of the tool (anything else that escapes a command).
 EXIT_INTERNAL_ERROR = 3
 
-#: Signals that stop a run as Ctrl-C does (SIGINT raises KeyboardInterrupt by itself):
-#: the temporary files are removed and the exit status is 128 + the signal's number.
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
 #: The environment variable of rerun's native logger (set to "off" unless the user set it).
 RERUN_LOG_VARIABLE = "RUST_LOG"

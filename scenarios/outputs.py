@@ -47,8 +47,11 @@ MARKER_TEXT = "written by robotsim reproduce; robotsim may replace this folder a
 PART_SUFFIX = ".part"
 OLD_SUFFIX = ".old"
 
-#: The signals whose handlers raise in the CLI (Ctrl-C and its stop signals).
-HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: Signals that stop a CLI run as Ctrl-C does (SIGINT raises KeyboardInterrupt by itself):
+#: the temporary files are removed and the exit status is 128 + the signal's number.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+#: The signals whose handlers raise in the CLI (Ctrl-C and :data:`STOP_SIGNALS`).
+HELD_SIGNALS = (signal.SIGINT, *STOP_SIGNALS)
 
 
 @contextlib.contextmanager
