@@ -63,14 +63,20 @@ def centres(boxes: np.ndarray) -> np.ndarray:
     return boxes[..., 0] + (boxes[..., 1] - boxes[..., 0]) / 2.0
 
 
-def bisect(boxes: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Bisect every box ``(N, d, 2)`` at the middle of its widest scaled dimension.
+def bisect(
+    boxes: np.ndarray, scale: np.ndarray | None = None, idle: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bisect every box ``(N, d, 2)`` at the middle of its widest scaled dimension, among its
+    axes not ``idle (N, d)`` when given (among all when every axis of a box is idle).
 
     Returns ``(left, right)``, each ``(N, d, 2)``; they share the cut value, so their union is
     exactly the parent box.
     """
     n = boxes.shape[0]
-    axis = np.argmax(widths(boxes, scale), axis=-1)
+    w = widths(boxes, scale)
+    if idle is not None:  # widths are >= 0: an idle axis (-1) is never the widest of the others
+        w = np.where(idle & ~np.all(idle, axis=1, keepdims=True), -1.0, w)
+    axis = np.argmax(w, axis=-1)
     rows = np.arange(n)
     cut = centres(boxes)[rows, axis]
     left, right = boxes.copy(), boxes.copy()

@@ -362,6 +362,7 @@ def _pave(
                 tighten_levels,
                 max_boxes=max_boxes,
                 max_tested=left,
+                idle=still,
             )
             tested[0] += seen
             paving = Subpaving(paving.inner, boundary, coarse=paving.coarse)

@@ -20,8 +20,9 @@ from intervals.errors import IntervalError
 from intervals.localize import gomne, localize
 from intervals.tighten import MAX_LEVELS, tighten
 from intervals.tracker import IntervalTracker, TrackerSettings
-from tests.helpers import random_scan_case
+from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges, random_scan_case
 from tests.intervals.test_contractor import _with_outliers, _wrong_readings
+from tests.intervals.test_whole_boxes import HALL_SEGMENTS, _scan, _wrong
 
 GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
 
@@ -138,6 +139,83 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     children = np.concatenate(bisect(cells))
     clipped, _, _ = tighten(cells, counts, _disk, widening, None, 1)
     assert np.array_equal(clipped, children[_disk(children)[0]][1:])
+
+
+def _slab(boxes, parents=None):
+    """``(keep, counts)`` for the slabs ``|y - 0.1 k| <= 0.15`` over ``k <= x < k + 1`` (a box
+    within one such strip, x idle in it): exact interval bounds."""
+    centre = 0.1 * np.floor(boxes[:, 0, 0])
+    gap = np.maximum(boxes[:, 1, 0] - centre, centre - boxes[:, 1, 1])
+    return gap <= 0.15, np.zeros(boxes.shape[0], dtype=np.int64)
+
+
+def test_tighten_never_cuts_an_idle_axis_and_keeps_boxes_idle_on_every_axis():
+    """``idle``: x idle in every box (the slab test cannot change along a box's x), every axis
+    idle in the boxes right of x = 2. No piece is cut across x, the boxes idle on every axis
+    come back as they were and untested, the slab's sampled points stay covered, and the set
+    is smaller than with the same cuts spent partly across x."""
+    edges = list(itertools.pairwise(np.linspace(0.0, 3.0, 4)))
+    cells = np.array([[x, y] for x in edges for y in itertools.pairwise(np.linspace(-1, 1, 9))])
+    keep, counts = _slab(cells)
+    cells, counts = cells[keep], counts[keep]
+
+    def idle(b):
+        return np.stack([np.ones(b.shape[0], bool), b[:, 0, 0] >= 2.0], axis=1)
+
+    out, _, tested = tighten(cells, counts, _slab, None, None, 6, idle=idle)
+    stuck = cells[:, 0, 0] >= 2.0
+    assert stuck.any() and not stuck.all()
+    parent = np.argmax(contains_points(cells, out.mean(axis=2)), axis=0)  # each piece's cell
+    assert np.array_equal(out[:, 0], cells[parent, 0])  # x bounds: never cut
+    assert all((out == cell).all(axis=(1, 2)).any() for cell in cells[stuck])
+    alone, _, alone_tested = tighten(cells[~stuck], counts[~stuck], _slab, None, None, 6, idle=idle)
+    assert tested == alone_tested  # the stuck boxes cost no test
+    assert np.array_equal(np.sort(out[: alone.shape[0]], axis=0), np.sort(alone, axis=0))
+    points = np.random.default_rng(3).uniform([0, -1], [3, 1], (20000, 2))
+    x0 = np.floor(points[:, 0])
+    points = points[np.abs(points[:, 1] - 0.1 * x0) <= 0.15]
+    assert contains_points(out, points).any(axis=0).all()
+    spread, _, _ = tighten(cells[~stuck], counts[~stuck], _slab, None, None, 6)  # across x too
+    assert volume(alone) < volume(spread) < volume(cells[~stuck])
+
+
+def test_whole_boxes_tightened_keep_every_consistent_pose_and_their_idle_length():
+    """GOMNE with whole boxes (idle axes) and tightening, along a wall of a 60 m hall, in a
+    corner and in the open, q in 0..2: every sampled pose explaining all but q readings lies in
+    the tightened set, no larger than the untightened one; a box whole along the wall (x idle)
+    stays as long: no cut across x."""
+    rng = np.random.default_rng(31)
+    params, kept, long_kept = DEFAULT_BELT, 0, 0
+    for case in range(6):
+        where = case % 3
+        if where == 0:  # along the south wall, far from the corners
+            truth = np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
+        elif where == 1:  # in the south-west corner
+            truth = np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
+        else:  # in the open, out of every wall's reach
+            truth = np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
+        readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
+        scan = _scan(readings, bool(case % 2), params)
+        q = case % 3
+        initial = np.stack([truth - [2.0, 0.4, 0.15], truth + [2.0, 0.4, 0.15]], axis=1)
+        plain = gomne(scan, initial, 0.05, q, whole_boxes=True)
+        tight = gomne(scan, initial, 0.05, q, whole_boxes=True, tighten_levels=6)
+        assert plain.consistent and tight.consistent and tight.q == plain.q
+        count = 4000  # poses along the strip: any x of the box, y and heading near the truth's
+        poses = truth + np.column_stack(
+            [rng.uniform(-2.0, 2.0, count), rng.normal(0, 0.05, count), rng.normal(0, 0.03, count)]
+        )
+        poses = poses[contains_points(initial[None], poses)[0]]
+        fits = _wrong(poses, scan, params) <= tight.q
+        held = contains_points(tight.paving.outer, poses).any(axis=0)
+        assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+        assert tight.paving.volume() <= plain.paving.volume()
+        x_width = np.max(plain.paving.outer[:, 0, 1] - plain.paving.outer[:, 0, 0])
+        if where == 0 and x_width > 1.0:
+            assert np.max(tight.paving.outer[:, 0, 1] - tight.paving.outer[:, 0, 0]) == x_width
+            long_kept += 1
+    assert kept > 1000 and long_kept >= 1  # the check saw consistent poses and a long box
 
 
 def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
