@@ -244,9 +244,9 @@ class TrackerSettings:
     volume to 2.1 to 2.6 times (median over the tracking epochs of seven built-in plans;
     ``office_floor`` 73 to 3.1, and 2.0 at 12 levels; ``benchmarks/tightness.py``), for an
     epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few (without
-    the test budget ``tighten_max_tested``; at its default, 9 levels give 2.3 to 2.8 on five plans
-    and 3.2 to 5.5 on ``symmetric``, ``corridor`` and ``office_floor``, tracking CPU p95 7 to 13
-    ms; BENCHMARKS.md, "Tightening at default cost")."""
+    the test budget ``tighten_max_tested``; at its default, 9 levels give 2.4 to 2.9 on six plans,
+    3.1 on ``symmetric`` and 5.5 on ``corridor`` and ``office_floor``, tracking CPU p95 5.3 to 9.8
+    ms at a load of 0.5; BENCHMARKS.md, "Tightening per piece")."""
     tighten_max_tested: int = bounded(2_000, minimum=0, maximum=10_000_000, integer=True)
     """With ``tighten_levels``, the most pieces the tightening may test in one epoch (within the
     budget's tests left): the largest boxes are refined first, the others kept as they are
