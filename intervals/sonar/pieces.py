@@ -21,7 +21,8 @@ while a sensor's verdict is final at the end of its list (or earlier,
 :func:`intervals.sonar.cone_kernel._decided`). That lets a piece stop once ``enough`` sensors
 reject it (a caller that only asks whether more than ``q`` do passes ``q + 1``: the verdict
 is the same, the row then holds only the rejections found); the sensors with the fewest pairs
-go first (an echo with none is rejected at no cost).
+go first (an echo with none is rejected at no cost), and the sensor that rejected the last piece
+of the parent before them (its siblings are often rejected by the same sensor).
 
 Soundness. A sensor rejects a piece when no remaining pair passes the piece's hit test, or
 when the free-space test fires on one. (1) A pair the parent ruled out cannot hold the
@@ -267,6 +268,9 @@ def piece_rejections_into(
                 if (echo and not hit) or fires:
                     reject[n, i] = True
                     rejected += 1
+                    for t in range(s, 0, -1):  # first for the next piece
+                        order[t] = order[t - 1]
+                    order[0] = i
 
 
 def piece_rejections(
