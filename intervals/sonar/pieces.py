@@ -23,6 +23,8 @@ reject it (a caller that only asks whether more than ``q`` do passes ``q + 1``: 
 is the same, the row then holds only the rejections found); the sensors with the fewest pairs
 go first (an echo with none is rejected at no cost), and the sensor that rejected the last piece
 of the parent before them (its siblings are often rejected by the same sensor).
+A sensor's box and wedges (:func:`intervals.sonar.cone_kernel.sensor_row`) are built only
+when the piece reaches a pair of it.
 
 Soundness. A sensor rejects a piece when no remaining pair passes the piece's hit test, or
 when the free-space test fires on one. (1) A pair the parent ruled out cannot hold the
@@ -79,6 +81,10 @@ PARAMS = (
 """The tolerances of :func:`piece_rejections_into`, in the order of its ``params`` array (those
 of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`)."""
 GUARD, NEAR_SWITCH = PARAMS.index("guard_m"), PARAMS.index("near_switch_m")
+APERTURE, MARGIN, ARC = (
+    PARAMS.index(name) for name in ("half_aperture_rad", "margin_m", "arc_slack")
+)
+ANGLE_MARGIN, TRIG_LIMIT = PARAMS.index("angle_margin_rad"), PARAMS.index("trig_limit_rad")
 
 
 @numba.njit(cache=True)
@@ -231,7 +237,10 @@ def piece_rejections_into(
         # each piece of this parent on those pairs only, sensor by sensor (the verdicts of a
         # sensor do not depend on the others', nor on the order of its segments)
         for n in range(p, pieces.shape[0], n_parents):
-            sure = _rows(pieces[n], piece_cos[n], piece_sin[n], belt, params, rows)
+            box, box_cos, box_sin = pieces[n], piece_cos[n], piece_sin[n]
+            full, half_turn, narrow, sure = cone_kernel.heading_flags(
+                box, params[APERTURE], params[ANGLE_MARGIN], params[TRIG_LIMIT]
+            )
             reject[n, :] = False
             rejected = 0
             for s in range(k):
@@ -246,6 +255,21 @@ def piece_rejections_into(
                     rejected += 1
                     continue
                 hit, fires = False, False
+                if pair_count[i]:  # the sensor's row of sensor_rows, only when a pair reads it
+                    cone_kernel.sensor_row(
+                        box,
+                        box_cos,
+                        box_sin,
+                        belt,
+                        i,
+                        full,
+                        half_turn,
+                        narrow,
+                        params[MARGIN],
+                        guard_m,
+                        params[ARC],
+                        rows,
+                    )
                 for c in range(pair_count[i]):
                     hit, fires = _pair_flags(
                         pair_segments[i, c, 0],
