@@ -7,24 +7,26 @@ plans that pair loop is most of the tightening's cost (``hall`` 1.7 us a piece, 
 without any pair; ``apartment`` 4.2 against 0.6). Most pairs can be ruled out once for the
 parent instead of once per piece.
 
-What. For each parent box the segments within reach are looked up once, and for each of them
-and each sensor the parent's own bounds say whether the pair can matter to any pose of the
-parent: the segment meets the parent's union of wedges (the half-planes of the hit test,
-:mod:`intervals.sonar.cone`) and its distance lower bound to the parent's sensor box is at
-most ``hi`` (an echo) or ``lo`` (a no-echo reading, ``lo = d_max``); the pairs kept are
-listed per sensor. A piece is then tested as by
+What. For each parent box the segments within reach are looked up once, and for each sensor
+a piece asks about the parent's own bounds say which of them can matter to any pose of the
+parent (:func:`_parent_pairs`, listed once a parent): the segment meets the parent's union of
+wedges (the half-planes of the hit test, :mod:`intervals.sonar.cone`) and its distance lower
+bound to the parent's sensor box is at most ``hi`` (an echo) or ``lo`` (a no-echo reading,
+``lo = d_max``). A piece is then tested as by
 :func:`intervals.sonar.cone_kernel.sensor_verdicts_into` (``inner`` false: rejections only),
 with its own sensor boxes and wedges, but on those pairs only, and sensor by sensor: a
-sensor's flags depend on its own pairs only and never on their order
-(:func:`_pair_flags`), so this gives the full loop's verdicts
-while a sensor's verdict is final at the end of its list (or earlier,
-:func:`intervals.sonar.cone_kernel._decided`). That lets a piece stop once ``enough`` sensors
-reject it (a caller that only asks whether more than ``q`` do passes ``q + 1``: the verdict
-is the same, the row then holds only the rejections found); the sensors with the fewest pairs
-go first (an echo with none is rejected at no cost), and the sensor that rejected the last piece
-of the parent before them (its siblings are often rejected by the same sensor).
-A sensor's box and wedges (:func:`intervals.sonar.cone_kernel.sensor_row`) are built only
-when the piece reaches a pair of it.
+sensor's flags depend on its own pairs only and never on their order (:func:`_pair_flags`),
+so this gives the full loop's verdicts while a sensor's verdict is final at the end of its
+list (or earlier, :func:`intervals.sonar.cone_kernel._decided`). That lets a piece stop once
+``enough`` sensors reject it (a caller that only asks whether more than ``q`` do passes ``q +
+1``: the verdict is the same, the row then holds only the rejections found). The sensor that
+rejected the last piece is tried first (siblings and neighbours are often rejected by the
+same sensor), and a sensor's box and wedges (:func:`intervals.sonar.cone_kernel.sensor_row`)
+and its pair list are built only when a piece reaches it.
+
+Cost (``benchmarks/`` replay of the tightening's calls at 9 levels, BENCHMARKS.md, "The piece
+test sensor by sensor"): 1.2 to 1.7 us a piece before, 0.35 (``hall``) to 0.55 us
+(``apartment``, ``corridor``) with ``enough = q + 1``; complete rows cost as before.
 
 Soundness. A sensor rejects a piece when no remaining pair passes the piece's hit test, or
 when the free-space test fires on one. (1) A pair the parent ruled out cannot hold the
@@ -61,7 +63,6 @@ from intervals.sonar.cone_kernel import (
     FREE,
     HX,
     HY,
-    IGNORED,
     INTER,
     SENSOR_COLUMNS,
     UNION,
@@ -138,6 +139,41 @@ def _pair_flags(ax, ay, ex, ey, rows, i, lo, hi, echo, sure, hit, fires, guard_m
 
 
 @numba.njit(cache=True)
+def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switch_m, out):
+    """The segments ``near[:count]`` (``(a, e)`` each) that can matter to sensor ``i`` for some
+    pose of the parent (``parent_rows``, :func:`_rows`): in its wedge half-planes, and within
+    ``hi`` (an echo) or ``lo`` (a no-echo reading) of its sensor box; into ``out[i]`` in the
+    order met. Returns how many."""
+    limit = ranges[i, 1] if kind[i] == ECHO else ranges[i, 0]
+    cx, cy = parent_rows[i, CX], parent_rows[i, CY]
+    hx, hy = parent_rows[i, HX], parent_rows[i, HY]
+    kept = 0
+    for c in range(count):
+        ax, ay, ex, ey = near[c, 0], near[c, 1], near[c, 2], near[c, 3]
+        t0, t1 = cone_kernel._clip(ax, ay, ex, ey, parent_rows[i], UNION)
+        if not t0 <= t1:
+            continue
+        dist_lb = (
+            cone_kernel._segment_box_gap(
+                ax + t0 * ex,
+                ay + t0 * ey,
+                (t1 - t0) * ex,
+                (t1 - t0) * ey,
+                cx,
+                cy,
+                hx,
+                hy,
+                near_switch_m,
+            )
+            - guard_m
+        )
+        if dist_lb <= limit:
+            out[i, kept, 0], out[i, kept, 1], out[i, kept, 2], out[i, kept, 3] = ax, ay, ex, ey
+            kept += 1
+    return kept
+
+
+@numba.njit(cache=True)
 def piece_rejections_into(
     pieces,
     piece_cos,
@@ -167,25 +203,27 @@ def piece_rejections_into(
     in ``params`` (:data:`PARAMS`)."""
     guard_m, near_switch_m = params[GUARD], params[NEAR_SWITCH]
     k, n_parents = belt.shape[0], parents.shape[0]
-    rows = np.empty((k, SENSOR_COLUMNS))
+    rows, parent_rows = np.empty((k, SENSOR_COLUMNS)), np.empty((k, SENSOR_COLUMNS))
     impossible = np.empty(k, dtype=np.bool_)
     for i in range(k):
         impossible[i] = kind[i] == ECHO and ranges[i, 0] > ranges[i, 1]
     visible = reach_m + guard_m
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # parent number + 1 of the last visit
-    # per sensor, the segments (a, e) of the pairs the parent leaves, in the order met
+    near = np.empty((segments.shape[0], 4))  # the parent's segments within reach: (a, e)
+    # per sensor, those of its pairs the parent leaves (a, e), listed when a piece first asks
+    listed = np.empty(k, dtype=np.bool_)
     pair_count = np.empty(k, dtype=np.int64)
     pair_segments = np.empty((k, segments.shape[0], 4))
-    order = np.empty(k, dtype=np.int64)  # the sensors of a parent, fewest pairs first
+    order = np.arange(k)  # the order the sensors are tried in: the last to reject a piece first
     for p in range(n_parents):
         # the parent's sensor boxes and wedges, the segments within reach of their hull
-        _rows(parents[p], parent_cos[p], parent_sin[p], belt, params, rows)
-        hull_cx, hull_cy, hull_hx, hull_hy = cone_kernel.sensor_hull(rows)
+        _rows(parents[p], parent_cos[p], parent_sin[p], belt, params, parent_rows)
+        hull_cx, hull_cy, hull_hx, hull_hy = cone_kernel.sensor_hull(parent_rows)
         ix0, ix1, iy0, iy1 = cone_kernel.reach_cells(
             hull_cx, hull_cy, hull_hx, hull_hy, visible, grid_origin, grid_cell_m, nx, ny
         )
-        pair_count[:] = 0
+        count = 0
         for ix in range(ix0, ix1 + 1):
             for cell in range(ix * ny + iy0, ix * ny + iy1 + 1):
                 for member in range(grid_starts[cell], grid_starts[cell + 1]):
@@ -198,42 +236,11 @@ def piece_rejections_into(
                     gap = cone_kernel._segment_box_gap(
                         ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
                     )
-                    if not gap <= visible:
-                        continue
-                    # the pairs that can matter: in the parent's wedge half-planes, and
-                    # within hi (an echo) or lo (a no-echo reading) of its sensor box
-                    for i in range(k):
-                        if kind[i] == IGNORED:
-                            continue
-                        t0, t1 = cone_kernel._clip(ax, ay, ex, ey, rows[i], UNION)
-                        if not t0 <= t1:
-                            continue
-                        dist_lb = (
-                            cone_kernel._segment_box_gap(
-                                ax + t0 * ex,
-                                ay + t0 * ey,
-                                (t1 - t0) * ex,
-                                (t1 - t0) * ey,
-                                rows[i, CX],
-                                rows[i, CY],
-                                rows[i, HX],
-                                rows[i, HY],
-                                near_switch_m,
-                            )
-                            - guard_m
-                        )
-                        limit = ranges[i, 1] if kind[i] == ECHO else ranges[i, 0]
-                        if dist_lb <= limit:
-                            c = pair_count[i]
-                            pair_segments[i, c, 0], pair_segments[i, c, 1] = ax, ay
-                            pair_segments[i, c, 2], pair_segments[i, c, 3] = ex, ey
-                            pair_count[i] = c + 1
-        for i in range(k):  # insertion sort by pair count (k is small)
-            pos = i
-            while pos > 0 and pair_count[order[pos - 1]] > pair_count[i]:
-                order[pos] = order[pos - 1]
-                pos -= 1
-            order[pos] = i
+                    if gap <= visible:
+                        near[count, 0], near[count, 1] = ax, ay
+                        near[count, 2], near[count, 3] = ex, ey
+                        count += 1
+        listed[:] = False
         # each piece of this parent on those pairs only, sensor by sensor (the verdicts of a
         # sensor do not depend on the others', nor on the order of its segments)
         for n in range(p, pieces.shape[0], n_parents):
@@ -254,6 +261,19 @@ def piece_rejections_into(
                     reject[n, i] = True
                     rejected += 1
                     continue
+                if not listed[i]:
+                    pair_count[i] = _parent_pairs(
+                        near,
+                        count,
+                        parent_rows,
+                        i,
+                        ranges,
+                        kind,
+                        guard_m,
+                        near_switch_m,
+                        pair_segments,
+                    )
+                    listed[i] = True
                 hit, fires = False, False
                 if pair_count[i]:  # the sensor's row of sensor_rows, only when a pair reads it
                     cone_kernel.sensor_row(
