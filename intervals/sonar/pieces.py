@@ -24,9 +24,10 @@ rejected the last piece is tried first (siblings and neighbours are often reject
 same sensor), and a sensor's box and wedges (:func:`intervals.sonar.cone_kernel.sensor_row`)
 and its pair list are built only when a piece reaches it.
 
-Cost (``benchmarks/`` replay of the tightening's calls at 9 levels, BENCHMARKS.md, "The piece
-test sensor by sensor"): 1.2 to 1.7 us a piece before, 0.35 (``hall``) to 0.55 us
-(``apartment``, ``corridor``) with ``enough = q + 1``; complete rows cost as before.
+Cost (``benchmarks/piece_replay.py``: the tightening's calls at 9 levels, ``enough = q + 1 =
+2`` as the tracker has it; BENCHMARKS.md, "The piece test sensor by sensor"): 0.79 us a piece
+on ``hall`` (1.35 before), 0.92 on ``office`` (1.58), 1.09 on ``apartment`` (2.19), 1.22 on
+``corridor`` (1.82); complete rows (``enough`` None) cost about as before.
 
 Soundness. A sensor rejects a piece when no remaining pair passes the piece's hit test, or
 when the free-space test fires on one. (1) A pair the parent ruled out cannot hold the
