@@ -94,11 +94,12 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None, pa
     sensor verdicts hold for them (:func:`intervals.sonar.idle.probes`; None: ``boxes``); the
     in-room test always sees ``boxes``. ``parents (P, 3, 2)`` (without ``inner`` or ``probe``):
     box ``n`` is a part of ``parents[n % P]``, and the sensors' test is
-    :func:`intervals.sonar.pieces.piece_rejections` (sound, on the pairs the parent leaves).
-    ``boxes`` are checked pose boxes (:func:`_pose_boxes`, or SIVIA's boxes), not checked
-    again."""
+    :func:`intervals.sonar.pieces.piece_rejections` (sound, on the pairs the parent leaves; a
+    box's row is left once ``q + 1`` sensors reject it, so the count of a rejected box may be
+    below the full count, its verdict the same). ``boxes`` are checked pose boxes
+    (:func:`_pose_boxes`, or SIVIA's boxes), not checked again."""
     if parents is not None:
-        reject = piece_rejections(boxes, parents, scan)
+        reject = piece_rejections(boxes, parents, scan, int(q) + 1)
         certain = np.zeros_like(reject)
     else:
         reject, certain = sensor_verdicts(boxes if probe is None else probe, scan, inner, True)

@@ -142,6 +142,67 @@ def _wedge_planes(ux, uy, flip, cx, cy, hx, hy, sign, guard_m, out, at):
 
 
 @numba.njit(cache=True)
+def heading_flags(box, half_aperture_rad, angle_margin_rad, trig_limit_rad):
+    """``(full, half_turn, narrow, sure)`` of the heading interval of a pose box ``(3, 2)``
+    (:func:`sensor_rows`): the mount arcs are whole circles, at least half turns, the wedges'
+    union is narrow enough for its half-planes, the direction set ``Psi`` is not empty."""
+    theta_lo, theta_hi = box[2, 0], box[2, 1]
+    width = theta_hi - theta_lo
+    trusted = abs(theta_lo) < trig_limit_rad and abs(theta_hi) < trig_limit_rad
+    full = not trusted or width >= 2.0 * np.pi - angle_margin_rad
+    half_turn = width >= np.pi
+    narrow = trusted and width + 2.0 * half_aperture_rad < np.pi - angle_margin_rad
+    sure = trusted and width < 2.0 * half_aperture_rad - angle_margin_rad
+    return full, half_turn, narrow, sure
+
+
+@numba.njit(cache=True, inline="always")
+def sensor_row(
+    box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
+):
+    """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
+    those of :func:`heading_flags`."""
+    cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
+    cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
+    ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
+    bx, by = cos_hi * cb - sin_hi * sb, sin_hi * cb + cos_hi * sb  # theta_hi + beta
+    reach_px = full or _arc_reaches(ax, ay, bx, by, 1.0, 0.0, half_turn, arc_slack)
+    reach_py = full or _arc_reaches(ax, ay, bx, by, 0.0, 1.0, half_turn, arc_slack)
+    reach_nx = full or _arc_reaches(ax, ay, bx, by, -1.0, 0.0, half_turn, arc_slack)
+    reach_ny = full or _arc_reaches(ax, ay, bx, by, 0.0, -1.0, half_turn, arc_slack)
+    cos_min = -1.0 if reach_nx else _min(ax, bx)
+    cos_max = 1.0 if reach_px else _max(ax, bx)
+    sin_min = -1.0 if reach_ny else _min(ay, by)
+    sin_max = 1.0 if reach_py else _max(ay, by)
+    r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
+    x_lo = box[0, 0] + _min(r_lo * cos_min, r_hi * cos_min) - margin_m
+    x_hi = box[0, 1] + _max(r_lo * cos_max, r_hi * cos_max) + margin_m
+    y_lo = box[1, 0] + _min(r_lo * sin_min, r_hi * sin_min) - margin_m
+    y_hi = box[1, 1] + _max(r_lo * sin_max, r_hi * sin_max) + margin_m
+    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
+    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
+    rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
+    rows[i, DIAG] = math.hypot(hx, hy)
+    # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
+    cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
+    cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
+    right_lo_x, right_lo_y = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
+    right_hi_x, right_hi_y = cos_hi * cr - sin_hi * sr, sin_hi * cr + cos_hi * sr
+    left_lo_x, left_lo_y = cos_lo * cl - sin_lo * sl, sin_lo * cl + cos_lo * sl
+    left_hi_x, left_hi_y = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
+    row = rows[i]
+    # union of the wedges over the box (a superset; unused, c = -inf, unless narrow)
+    _wedge_planes(right_lo_x, right_lo_y, 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
+    _wedge_planes(left_hi_x, left_hi_y, -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
+    if not narrow:
+        row[UNION + 2] = -np.inf
+        row[UNION + 5] = -np.inf
+    # intersection of the wedges (a subset; used only when sure)
+    _wedge_planes(right_hi_x, right_hi_y, 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
+    _wedge_planes(left_lo_x, left_lo_y, -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+
+
+@numba.njit(cache=True)
 def sensor_rows(
     box,
     cos_theta,
@@ -159,52 +220,24 @@ def sensor_rows(
     heading bounds have the cosines ``cos_theta (2,)`` and sines ``sin_theta (2,)``, into
     ``rows (k, SENSOR_COLUMNS)`` (as ``intervals.sonar.reference.cone.sensor_boxes``); returns ``sure``
     (the direction set ``Psi`` is not empty: the intersection half-planes may be used)."""
-    theta_lo, theta_hi = box[2, 0], box[2, 1]
-    width = theta_hi - theta_lo
-    trusted = abs(theta_lo) < trig_limit_rad and abs(theta_hi) < trig_limit_rad
-    full = not trusted or width >= 2.0 * np.pi - angle_margin_rad
-    half_turn = width >= np.pi
-    narrow = trusted and width + 2.0 * half_aperture_rad < np.pi - angle_margin_rad
-    sure = trusted and width < 2.0 * half_aperture_rad - angle_margin_rad
-    cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
+    full, half_turn, narrow, sure = heading_flags(
+        box, half_aperture_rad, angle_margin_rad, trig_limit_rad
+    )
     for i in range(belt.shape[0]):
-        cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
-        ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
-        bx, by = cos_hi * cb - sin_hi * sb, sin_hi * cb + cos_hi * sb  # theta_hi + beta
-        reach_px = full or _arc_reaches(ax, ay, bx, by, 1.0, 0.0, half_turn, arc_slack)
-        reach_py = full or _arc_reaches(ax, ay, bx, by, 0.0, 1.0, half_turn, arc_slack)
-        reach_nx = full or _arc_reaches(ax, ay, bx, by, -1.0, 0.0, half_turn, arc_slack)
-        reach_ny = full or _arc_reaches(ax, ay, bx, by, 0.0, -1.0, half_turn, arc_slack)
-        cos_min = -1.0 if reach_nx else _min(ax, bx)
-        cos_max = 1.0 if reach_px else _max(ax, bx)
-        sin_min = -1.0 if reach_ny else _min(ay, by)
-        sin_max = 1.0 if reach_py else _max(ay, by)
-        r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
-        x_lo = box[0, 0] + _min(r_lo * cos_min, r_hi * cos_min) - margin_m
-        x_hi = box[0, 1] + _max(r_lo * cos_max, r_hi * cos_max) + margin_m
-        y_lo = box[1, 0] + _min(r_lo * sin_min, r_hi * sin_min) - margin_m
-        y_hi = box[1, 1] + _max(r_lo * sin_max, r_hi * sin_max) + margin_m
-        cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
-        hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
-        rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
-        rows[i, DIAG] = math.hypot(hx, hy)
-        # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
-        cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
-        cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
-        right_lo_x, right_lo_y = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
-        right_hi_x, right_hi_y = cos_hi * cr - sin_hi * sr, sin_hi * cr + cos_hi * sr
-        left_lo_x, left_lo_y = cos_lo * cl - sin_lo * sl, sin_lo * cl + cos_lo * sl
-        left_hi_x, left_hi_y = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
-        row = rows[i]
-        # union of the wedges over the box (a superset; unused, c = -inf, unless narrow)
-        _wedge_planes(right_lo_x, right_lo_y, 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
-        _wedge_planes(left_hi_x, left_hi_y, -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
-        if not narrow:
-            row[UNION + 2] = -np.inf
-            row[UNION + 5] = -np.inf
-        # intersection of the wedges (a subset; used only when sure)
-        _wedge_planes(right_hi_x, right_hi_y, 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
-        _wedge_planes(left_lo_x, left_lo_y, -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+        sensor_row(
+            box,
+            cos_theta,
+            sin_theta,
+            belt,
+            i,
+            full,
+            half_turn,
+            narrow,
+            margin_m,
+            guard_m,
+            arc_slack,
+            rows,
+        )
     return sure
 
 

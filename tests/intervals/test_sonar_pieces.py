@@ -81,3 +81,29 @@ def test_no_pieces_and_a_piece_that_is_its_parent():
     assert piece_rejections(parents[:0], parents, scan).shape == (0, scan.belt.count)
     full = sensor_verdicts(parents, scan, inner=False)[0]
     assert np.array_equal(piece_rejections(parents, parents, scan), full)
+
+
+@pytest.mark.parametrize("enough", (1, 2, 4))
+def test_a_piece_left_at_enough_rejections_has_the_same_verdict(enough):
+    """``enough``: a row holds only rejections of the complete row, exactly ``min(enough,
+    full count)`` of them, and a row with fewer than ``enough`` is the complete row; so
+    "more than ``q``" (``enough = q + 1``) is decided as on the complete rows."""
+    rng = np.random.default_rng(40 + enough)
+    short = 0
+    for case in range(6):
+        scan, _, truth = random_scan_case(
+            rng, GAMMAS_RAD[case % 3], echoes_never_lost=bool(case % 2)
+        )
+        scan = _with_outliers(scan, rng, case % 3)
+        parents = _parents(truth, rng, 24)
+        pieces = parents
+        for _ in range(3):
+            pieces = np.concatenate(bisect(pieces, None))
+        full = piece_rejections(pieces, parents, scan)
+        left = piece_rejections(pieces, parents, scan, enough)
+        assert not (left & ~full).any()
+        counts, full_counts = left.sum(axis=1), full.sum(axis=1)
+        assert np.array_equal(counts, np.minimum(full_counts, enough))
+        assert np.array_equal(left[counts < enough], full[counts < enough])
+        short += int(np.count_nonzero(full_counts > enough))
+    assert short > 50  # rows were cut short
