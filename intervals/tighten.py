@@ -39,7 +39,10 @@ what holds for all its children: the pipeline's (:func:`intervals.localize.local
 each piece only on the (segment, sensor) pairs its parent's bounds leave
 (:mod:`intervals.sonar.pieces`), which took the test's share of the pass from 4.2 to 3.1 ms an
 epoch on ``hall``, 6.8 to 4.6 on ``office`` and 5.6 to 3.4 on ``apartment`` (9 levels, the
-same pieces kept; BENCHMARKS.md, "Tightening at default cost"). Under the caps a call refines
+same pieces kept; BENCHMARKS.md, "Tightening at default cost"); testing a piece sensor by
+sensor and leaving it once ``q + 1`` sensors reject it made a piece 1.5 to 2 times cheaper
+again (0.8 us on ``hall``, 1.2 on ``corridor``; BENCHMARKS.md, "The piece test sensor by
+sensor"). Under the caps a call refines
 only the largest boxes (by volume) for which there is room: the set after it holds at most
 ``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they are,
 and when there is room for none the pass stops (sound either way, only coarser: refining
