@@ -13,7 +13,10 @@ only the order across runs changes, so a run's result is theirs bit for bit (tes
 ``tests/localization/test_compiled_soa.py``). The maths is documented there (paper 001 eq.
 25-35); the motion models are the scalar functions of :mod:`localization.compiled.motion`
 (``*_scalar``, ``*_noisy_scalar``), called per run. The results are written straight into
-the caller's ``(B, n)`` / ``(B, n, n)`` outputs.
+the caller's ``(B, n)`` / ``(B, n, n)`` outputs. The entries (:func:`predict_builtin`,
+:func:`noisy_predict_builtin`, :func:`update_leading_entries`) are those of the built-in
+kernels in :data:`localization.compiled.ukf.PREDICT_ENTRIES` and ``UPDATE_ENTRIES``; a user's
+kernel (an array function) and one run of the lean filters take the per-run functions.
 
 Status. Every run gets its status as the per-run functions decide it, in their order
 (update: ``z`` not finite, then ``P`` not positive definite, then ``S``, then a result not
@@ -227,12 +230,12 @@ def _dt_of(args, start, count, dt) -> None:
         dt[c] = args[start + c if args.shape[0] > 1 else 0, 0]
 
 
-@numba.njit(cache=True, error_model="numpy")
-def predict_soa(model, augmented, mean, cov, args, noise, weights, angles, out_mean, out_cov):
+@_jit
+def _predict(model, augmented, mean, cov, args, noise, weights, angles, out_mean, out_cov):
     """The batched prediction of the built-in model ``model``, additive noise (``noise`` is
     ``Q (B or 1, n, n)``) or ``augmented`` (``noise`` a square root ``S (B or 1, q, q)``,
-    ``weights`` those of dimension ``n + q``); arguments and status as the entries of
-    :mod:`localization.compiled.ukf` (module docstring)."""
+    ``weights`` those of dimension ``n + q``); arguments and status as the module docstring
+    says. Called through :func:`predict_builtin` and :func:`noisy_predict_builtin`."""
     if not all_finite(args):
         return NOT_FINITE
     n, q = mean.shape[1], noise.shape[1]
@@ -283,8 +286,10 @@ def predict_soa(model, augmented, mean, cov, args, noise, weights, angles, out_m
     return OK
 
 
-@numba.njit(cache=True, error_model="numpy")
-def update_soa(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov):
+@_jit
+def update_leading_entries(
+    mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
+):
     """The batched update by the GPS or pose model (``z (B, m)`` the leading ``m`` entries of
     the state, :func:`~localization.compiled.motion.leading_entries_point`), ``r_cov (B or 1, m,
     m)``; arguments and status as :func:`localization.compiled.ukf.update_run` per run."""
@@ -393,9 +398,7 @@ def update_soa(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mea
         for c in range(count):
             if not all_finite(z[start + c]):
                 status[c] = NOT_FINITE
-            elif not pd[c]:
-                status[c] = NOT_POSITIVE_DEFINITE
-            elif not pd_s[c]:
+            elif not (pd[c] and pd_s[c]):  # P, then S
                 status[c] = NOT_POSITIVE_DEFINITE
             else:
                 status[c] = OK
@@ -403,3 +406,17 @@ def update_soa(mean, cov, z, args, r_cov, weights, state_angles, angles, out_mea
         if found != OK:
             return found
     return OK
+
+
+@_jit
+def predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov) -> int:
+    """The batched prediction of the built-in model number ``model``, additive noise
+    ``q_cov (B or 1, n, n)`` (:func:`_predict`)."""
+    return _predict(model, False, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
+
+
+@_jit
+def noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov) -> int:
+    """The batched prediction of the built-in model number ``model``, augmented noise with the
+    square root ``root (B or 1, q, q)`` (:func:`_predict`)."""
+    return _predict(model, True, mean, cov, args, root, weights, angles, out_mean, out_cov)
