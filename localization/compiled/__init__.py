@@ -8,6 +8,7 @@ module                 holds
 ``glue``               status codes, argument packing and entry calls (Python side)
 ``ukf``, ``ekf``       the batched filter steps behind ``UnscentedKalmanFilter`` and
                        ``ExtendedKalmanFilter``
+``soa``                the UKF's batched steps of the built-in models, runs innermost
 ``lean``               one filter stepped in place, one call a step or a sequence
 ``dead_reckoning``     the dead-reckoning filter over a stretch of samples
 ``mcl``                the Monte Carlo localisation kernels

@@ -1,7 +1,8 @@
-"""The loop over a batch's runs, one body for the compiled UKF and EKF steps.
+"""The loop over a batch's runs around a per-run step: the compiled EKF's and a user kernel's UKF.
 
 :mod:`localization.compiled.ukf` and :mod:`localization.compiled.ekf` write each step once for
-one run, their run functions taking the same arguments in the same order::
+one run (the built-in UKF kernels' batches take :mod:`localization.compiled.soa` instead),
+their run functions taking the same arguments in the same order::
 
     predict: run(selector, x (n,), P (n, n), args (k,), noise (q, q), weights (3,), angles,
                  out_mean (n,), out_cov (n, n), scratch)

@@ -6,7 +6,7 @@ and everything else is generated from it:
 
 - ``*_point(x (n,), args (1,) = (dt_s,), out (n,))``: the transition of one state, written
   into ``out``; ``*_noisy_point(x, e (2,), args, out)`` the same with the noise increments
-  ``e`` of the augmented UKF (``x`` overwritten); ``*_jacobian_point(x, args, out (n, n))``
+  ``e`` of the augmented UKF (``*_noisy_scalar``); ``*_jacobian_point(x, args, out (n, n))``
   its Jacobian; :func:`trig_moments_point` the trigonometric moments they share.
 - The batched numpy API of :mod:`localization.motion_models` (``cv_transition(x (..., n),
   dt_s)`` and the rest) runs these kernels over the rows of a batch (:func:`transition_rows`,
@@ -200,45 +200,81 @@ def cca_point(x, args, out) -> None:
     out[0], out[1], out[2], out[3] = cca_scalar(x[0], x[1], x[2], x[3], x[4], x[5], args[0])
 
 
-@numba.njit(cache=True)
-def _half_increment(values, noise, first) -> None:
-    """``values[first + j] += noise[j] / 2``: half of the ramp of
-    :meth:`localization.motion_models.MotionModel.transition_with_noise` (applied to the state before the transition, at
-    mid-step, and to its image after it)."""
-    for j in range(noise.shape[0]):
-        values[first + j] += 0.5 * noise[j]
+# The augmented UKF's noise increments ``(e_0, e_1)`` ramp two entries (the driven ones) over the
+# step (:meth:`localization.motion_models.MotionModel.transition_with_noise`): half of each is
+# added to the state before the transition (at mid-step) and half to its image after it.
+
+
+@numba.njit(cache=True, inline="always")
+def cv_noisy_scalar(px, py, vx, vy, e_vx, e_vy, dt):
+    """CV (:func:`cv_scalar`) with the increments ``(e_vx, e_vy)`` of ``(vx, vy)``: the new
+    ``(x, y, vx, vy)``."""
+    vx_mid, vy_mid = vx + 0.5 * e_vx, vy + 0.5 * e_vy
+    px1, py1 = cv_scalar(px, py, vx_mid, vy_mid, dt)
+    return px1, py1, vx_mid + 0.5 * e_vx, vy_mid + 0.5 * e_vy
+
+
+@numba.njit(cache=True, inline="always")
+def ctrv_noisy_scalar(px, py, theta, v, omega, e_v, e_omega, dt):
+    """CTRV (:func:`ctrv_scalar`) with the increments ``(e_v, e_omega)`` of ``(v, omega)``: the
+    new ``(x, y, theta, v, omega)``."""
+    v_mid, omega_mid = v + 0.5 * e_v, omega + 0.5 * e_omega
+    px1, py1, theta1 = ctrv_scalar(px, py, theta, v_mid, omega_mid, dt)
+    return px1, py1, theta1, v_mid + 0.5 * e_v, omega_mid + 0.5 * e_omega
+
+
+@numba.njit(cache=True, inline="always")
+def ctra_noisy_scalar(px, py, theta, v, accel, omega, e_accel, e_omega, dt):
+    """CTRA (:func:`ctra_scalar`) with the increments ``(e_accel, e_omega)`` of ``(a, omega)``:
+    the new ``(x, y, theta, v, a, omega)``."""
+    accel_mid, omega_mid = accel + 0.5 * e_accel, omega + 0.5 * e_omega
+    px1, py1, theta1, v1 = ctra_scalar(px, py, theta, v, accel_mid, omega_mid, dt)
+    return px1, py1, theta1, v1, accel_mid + 0.5 * e_accel, omega_mid + 0.5 * e_omega
+
+
+@numba.njit(cache=True, inline="always")
+def cca_noisy_scalar(px, py, theta, v, a, c, e_a, e_c, dt):
+    """CCA (:func:`cca_scalar`) with the increments ``(e_a, e_c)`` of ``(a, c)``: the new
+    ``(x, y, theta, v, a, c)``."""
+    a_mid, c_mid = a + 0.5 * e_a, c + 0.5 * e_c
+    px1, py1, theta1, v1 = cca_scalar(px, py, theta, v, a_mid, c_mid, dt)
+    return px1, py1, theta1, v1, a_mid + 0.5 * e_a, c_mid + 0.5 * e_c
 
 
 @numba.njit(cache=True)
 def cv_noisy_point(x, noise, args, out) -> None:
-    """CV with the increments ``noise (2,)`` of ``(vx, vy)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 2)
-    cv_point(x, args, out)
-    _half_increment(out, noise, 2)
+    """CV with the increments ``noise (2,)`` of ``(vx, vy)`` (augmented noise,
+    :func:`cv_noisy_scalar`), into ``out (4,)``."""
+    out[0], out[1], out[2], out[3] = cv_noisy_scalar(
+        x[0], x[1], x[2], x[3], noise[0], noise[1], args[0]
+    )
 
 
 @numba.njit(cache=True)
 def ctrv_noisy_point(x, noise, args, out) -> None:
-    """CTRV with the increments ``noise (2,)`` of ``(v, omega)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 3)
-    ctrv_point(x, args, out)
-    _half_increment(out, noise, 3)
+    """CTRV with the increments ``noise (2,)`` of ``(v, omega)`` (augmented noise,
+    :func:`ctrv_noisy_scalar`), into ``out (5,)``."""
+    out[0], out[1], out[2], out[3], out[4] = ctrv_noisy_scalar(
+        x[0], x[1], x[2], x[3], x[4], noise[0], noise[1], args[0]
+    )
 
 
 @numba.njit(cache=True)
 def ctra_noisy_point(x, noise, args, out) -> None:
-    """CTRA with the increments ``noise (2,)`` of ``(a, omega)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 4)
-    ctra_point(x, args, out)
-    _half_increment(out, noise, 4)
+    """CTRA with the increments ``noise (2,)`` of ``(a, omega)`` (augmented noise,
+    :func:`ctra_noisy_scalar`), into ``out (6,)``."""
+    out[0], out[1], out[2], out[3], out[4], out[5] = ctra_noisy_scalar(
+        x[0], x[1], x[2], x[3], x[4], x[5], noise[0], noise[1], args[0]
+    )
 
 
 @numba.njit(cache=True)
 def cca_noisy_point(x, noise, args, out) -> None:
-    """CCA with the increments ``noise (2,)`` of ``(a, c)`` (augmented noise); ``x`` overwritten."""
-    _half_increment(x, noise, 4)
-    cca_point(x, args, out)
-    _half_increment(out, noise, 4)
+    """CCA with the increments ``noise (2,)`` of ``(a, c)`` (augmented noise,
+    :func:`cca_noisy_scalar`), into ``out (6,)``."""
+    out[0], out[1], out[2], out[3], out[4], out[5] = cca_noisy_scalar(
+        x[0], x[1], x[2], x[3], x[4], x[5], noise[0], noise[1], args[0]
+    )
 
 
 @numba.njit(cache=True)
@@ -365,7 +401,7 @@ def transition_rows(model, x, dt, out) -> None:
 @numba.njit(cache=True)
 def noisy_transition_rows(model, x, noise, dt, out) -> None:
     """``out (N, n)``: the noise-augmented transition of each row of ``x (N, n)`` with the
-    increments ``noise (N, 2)`` over ``dt (N,)`` seconds; ``x`` is overwritten."""
+    increments ``noise (N, 2)`` over ``dt (N,)`` seconds."""
     for i in range(x.shape[0]):
         args = dt[i : i + 1]
         if model == 0:

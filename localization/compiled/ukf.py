@@ -37,18 +37,19 @@ flattened, in order. The kernels of the motion models are :mod:`localization.com
 
 Entries. Each step is written once for one run (:func:`predict_run`,
 :func:`augmented_predict_run`, :func:`update_run`), the kernel and the scratch (one float array,
-carved by the run) passed in, so that it allocates nothing; :mod:`localization.compiled.batch` generates the loop over a
-batch's runs (scratch allocated once per call) around a run function, and the lean
-entries of :mod:`localization.compiled.lean` call the run functions on scratch kept in the
-filter. Functions that take a kernel as an argument are only called from other compiled
-functions, so numba inlines the kernel into a specialised copy. The entries Python calls are
-module-level and cached on disk (``cache=True``) for the built-in kernels
-(:data:`PREDICT_ENTRIES`, :data:`UPDATE_ENTRIES`; one prediction entry switches between the
-four motion models, so their first compilation, about 10 s per noise kind, happens together);
-for a user's own kernel :func:`predict_entry` / :func:`update_entry` build an uncached entry,
-compiled at its first call and memoised per kernel. numba's disk cache keys an entry on this
-file only; :mod:`localization.kernel_cache` drops the folder's cache whenever any of its files
-changes.
+carved by the run) passed in, so that it allocates nothing; the lean entries of
+:mod:`localization.compiled.lean` call the run functions on scratch kept in the filter, and
+for a user's own kernel :func:`predict_entry` / :func:`update_entry` build a batched entry,
+the loop over the runs of :mod:`localization.compiled.batch` around a run function (uncached,
+compiled at its first call and memoised per kernel). Functions that take a kernel as an
+argument are only called from other compiled functions, so numba inlines the kernel into a
+specialised copy. The batched entries of the built-in kernels (:data:`PREDICT_ENTRIES`,
+:data:`UPDATE_ENTRIES`) are those of :mod:`localization.compiled.soa`: the same operations
+per run as the run functions, a block of runs at a time in structure-of-arrays layout (about
+2x faster across runs, bit for bit the same results), cached on disk (``cache=True``); one
+prediction entry switches between the four motion models, so their first compilation happens
+together. numba's disk cache keys an entry on its own file only;
+:mod:`localization.kernel_cache` drops the folder's cache whenever any of its files changes.
 
 Status. An entry returns a status code of :mod:`localization.compiled.glue`: ``OK``,
 ``NOT_POSITIVE_DEFINITE`` (a covariance to factorise, ``P`` or ``S``) or ``NOT_FINITE`` (an
@@ -68,7 +69,7 @@ import numba
 import numpy as np
 from numba.extending import register_jitable
 
-from localization.compiled import motion
+from localization.compiled import motion, soa
 from localization.compiled.batch import batched_predict, batched_update, carve
 from localization.compiled.glue import (
     NOT_FINITE,
@@ -369,45 +370,20 @@ def leading_entries_update_run(
     )
 
 
-_builtin_predict = batched_predict(builtin_predict_run, predict_scratch_length)
-_builtin_augmented_predict = batched_predict(builtin_augmented_predict_run, predict_scratch_length)
-_leading_entries_update = batched_update(leading_entries_update_run, update_scratch_length)
-
-
-@numba.njit(cache=True)
-def predict_builtin(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov):
-    """The batched prediction by :func:`builtin_predict_run` (additive noise)."""
-    return _builtin_predict(model, mean, cov, args, q_cov, weights, angles, out_mean, out_cov)
-
-
-@numba.njit(cache=True)
-def noisy_predict_builtin(model, mean, cov, args, root, weights, angles, out_mean, out_cov):
-    """The batched prediction by :func:`builtin_augmented_predict_run` (augmented noise)."""
-    return _builtin_augmented_predict(
-        model, mean, cov, args, root, weights, angles, out_mean, out_cov
-    )
-
-
-@numba.njit(cache=True)
-def update_leading_entries(
-    mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
-):
-    """The batched update by :func:`leading_entries_update_run` (the GPS or pose model)."""
-    return _leading_entries_update(
-        mean, cov, z, args, r_cov, weights, state_angles, angles, out_mean, out_cov
-    )
-
-
 #: Prediction entries by (kernel, augmented): ``(entry, number)``, called ``entry(number, ...)``;
-#: the built-ins' (cached on disk), then users' (:func:`predict_entry`).
+#: the built-ins' (:mod:`localization.compiled.soa`, cached on disk), then users'
+#: (:func:`predict_entry`).
 PREDICT_ENTRIES = {
-    (kernel, bool(augmented)): (noisy_predict_builtin if augmented else predict_builtin, number)
+    (kernel, bool(augmented)): (
+        soa.noisy_predict_builtin if augmented else soa.predict_builtin,
+        number,
+    )
     for number, pair in enumerate(BUILTIN_PROCESS_KERNELS)
     for augmented, kernel in enumerate(pair)
 }
 
 #: Cached entries of the built-in measurement kernels, by kernel.
-UPDATE_ENTRIES = {motion.leading_entries_point: update_leading_entries}
+UPDATE_ENTRIES = {motion.leading_entries_point: soa.update_leading_entries}
 
 
 # -------------------------------------------------------------------- entries of user kernels
