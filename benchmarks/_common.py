@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -146,3 +147,18 @@ def code_label(tree: Path) -> str:
         return done.stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return tree.name
+
+
+def record_calls(module: ModuleType, name: str) -> list[tuple]:
+    """Wrap ``module.name`` (a function looked up through its module at each call) so that each
+    call's arguments are appended to the returned list, arrays copied, before it runs; the
+    wrapper stays for the process (a recording benchmark's child)."""
+    compiled = getattr(module, name)
+    calls: list[tuple] = []
+
+    def recording(*args):
+        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+        return compiled(*args)
+
+    setattr(module, name, recording)
+    return calls

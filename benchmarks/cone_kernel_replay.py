@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import record_calls
 
 PLANS = ("corridor", "office_floor", "apartment", "big_hall")
 KEPT_CALLS = 300
@@ -36,14 +37,7 @@ def record(folder: Path, plans: list[str], duration_s: float) -> None:
     from intervals.sonar import cone_kernel
     from scenarios.cli import main
 
-    compiled = cone_kernel.sensor_verdicts_into
-    calls: list[tuple] = []
-
-    def recording(*args):
-        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
-        return compiled(*args)
-
-    cone_kernel.sensor_verdicts_into = recording
+    calls = record_calls(cone_kernel, "sensor_verdicts_into")
     folder.mkdir(parents=True, exist_ok=True)
     for plan in plans:
         calls.clear()

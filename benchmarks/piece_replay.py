@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import record_calls
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 PLANS = ("hall", "office", "apartment", "corridor")
@@ -40,14 +41,7 @@ def record(folder: Path, plans: list[str], duration_s: float, changes: dict) -> 
 
     from intervals.sonar import pieces
 
-    compiled = pieces.piece_rejections_into
-    calls: list[tuple] = []
-
-    def recording(*args):
-        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
-        return compiled(*args)
-
-    pieces.piece_rejections_into = recording
+    calls = record_calls(pieces, "piece_rejections_into")
     folder.mkdir(parents=True, exist_ok=True)
     for plan in plans:
         calls.clear()

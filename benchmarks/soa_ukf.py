@@ -25,25 +25,18 @@ import time
 import numpy as np
 
 from localization.compiled import soa
-from localization.compiled import ukf as compiled_ukf
-from localization.compiled.batch import batched_predict, batched_update
 from localization.compiled.glue import OK, angle_array
 from localization.motion_models import CTRV
+from localization.reference.per_run_ukf import (
+    per_run_augmented,
+    per_run_predict,
+    per_run_update,
+)
 from localization.sigma_points import ScaledSigmaPoints
 
 CTRV_NUMBER = 1
 HEADING = angle_array((2,))
 POINTS = ScaledSigmaPoints(alpha=1e-3, beta=2.0, kappa=0.0)
-
-per_run_predict = batched_predict(
-    compiled_ukf.builtin_predict_run, compiled_ukf.predict_scratch_length
-)
-per_run_augmented = batched_predict(
-    compiled_ukf.builtin_augmented_predict_run, compiled_ukf.predict_scratch_length
-)
-per_run_update = batched_update(
-    compiled_ukf.leading_entries_update_run, compiled_ukf.update_scratch_length
-)
 
 
 def _read_only(values) -> np.ndarray:

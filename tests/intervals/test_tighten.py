@@ -22,7 +22,7 @@ from intervals.tighten import MAX_LEVELS, tighten
 from intervals.tracker import IntervalTracker, TrackerSettings
 from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges, random_scan_case
 from tests.intervals.test_contractor import _with_outliers, _wrong_readings
-from tests.intervals.test_whole_boxes import HALL_SEGMENTS, _scan, _wrong
+from tests.intervals.test_whole_boxes import HALL_SEGMENTS, _scan, _wrong, hall_truth
 
 GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
 
@@ -188,12 +188,7 @@ def test_whole_boxes_tightened_keep_every_consistent_pose_and_their_idle_length(
     params, kept, long_kept = DEFAULT_BELT, 0, 0
     for case in range(6):
         where = case % 3
-        if where == 0:  # along the south wall, far from the corners
-            truth = np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
-        elif where == 1:  # in the south-west corner
-            truth = np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
-        else:  # in the open, out of every wall's reach
-            truth = np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
+        truth = hall_truth(rng, where)
         readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
         scan = _scan(readings, bool(case % 2), params)
         q = case % 3

@@ -28,6 +28,17 @@ HALL = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, 60.0], [0.0, 60.0]])
 HALL_SEGMENTS = np.stack([HALL, np.roll(HALL, -1, axis=0)], axis=1)
 
 
+def hall_truth(rng: np.random.Generator, where: int) -> np.ndarray:
+    """A random pose ``(x_m, y_m, theta_rad)`` in the 60 m hall: ``where`` 0 along the south
+    wall far from the corners, 1 in the south-west corner, 2 in the open, out of every wall's
+    reach."""
+    if where == 0:
+        return np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
+    if where == 1:
+        return np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
+    return np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
+
+
 def _scan(readings, echoes_never_lost=False, params=DEFAULT_BELT):
     belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
     return SonarScan(HALL_SEGMENTS, belt, readings, HALL)
@@ -119,12 +130,7 @@ def test_whole_boxes_keep_every_consistent_pose_along_the_walls_and_in_the_open(
     params, kept, smaller = DEFAULT_BELT, 0, 0
     for case in range(18):
         where = case % 3
-        if where == 0:  # along the south wall, far from the corners
-            truth = np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
-        elif where == 1:  # in the south-west corner
-            truth = np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
-        else:  # in the open, out of every wall's reach
-            truth = np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
+        truth = hall_truth(rng, where)
         readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
         never_lost = bool(case % 2)
         if not never_lost:

@@ -13,20 +13,13 @@ import numpy as np
 import pytest
 
 from localization.compiled import soa
-from localization.compiled import ukf as compiled_ukf
-from localization.compiled.batch import batched_predict, batched_update
 from localization.compiled.glue import NOT_FINITE, NOT_POSITIVE_DEFINITE, OK, angle_array
+from localization.reference.per_run_ukf import (
+    per_run_augmented,
+    per_run_predict,
+    per_run_update,
+)
 from localization.sigma_points import ScaledSigmaPoints
-
-per_run_predict = batched_predict(
-    compiled_ukf.builtin_predict_run, compiled_ukf.predict_scratch_length
-)
-per_run_augmented = batched_predict(
-    compiled_ukf.builtin_augmented_predict_run, compiled_ukf.predict_scratch_length
-)
-per_run_update = batched_update(
-    compiled_ukf.leading_entries_update_run, compiled_ukf.update_scratch_length
-)
 
 DIMENSIONS = {0: 4, 1: 5, 2: 6, 3: 6}  # CV, CTRV, CTRA, CCA
 HEADING = {0: (), 1: (2,), 2: (2,), 3: (2,)}
