@@ -683,8 +683,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         body = "\n\n".join(
             [
-                f"Machine: {machine_line('filterpy', 'stonesoup')}; {load} (2 cores shared "
-                "with other jobs: the absolute times are inflated, the interleaved ratios much "
+                f"Machine: {machine_line('filterpy', 'stonesoup')}; {load} (on 2 cores a load "
+                "near 2 or above inflates the absolute times, the interleaved ratios much "
                 "less).",
                 f"```sh\n{command}\n```",
                 SETUP,
