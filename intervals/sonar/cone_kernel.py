@@ -161,7 +161,8 @@ def sensor_row(
     box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
 ):
     """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
-    those of :func:`heading_flags`."""
+    those of :func:`heading_flags`; all but the half-diagonal ``DIAG`` (``hypot(hx, hy)``, which
+    :func:`sensor_rows` adds: :mod:`intervals.sonar.pieces` computes it only when needed)."""
     cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
     cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
     ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
@@ -182,7 +183,6 @@ def sensor_row(
     cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
     hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
     rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
-    rows[i, DIAG] = math.hypot(hx, hy)
     # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
     cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
     cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
@@ -238,6 +238,7 @@ def sensor_rows(
             arc_slack,
             rows,
         )
+        rows[i, DIAG] = math.hypot(rows[i, HX], rows[i, HY])
     return sure
 
 

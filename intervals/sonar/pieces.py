@@ -43,12 +43,28 @@ firing on a pair ruled out by the parent would have rejected it). The parent's b
 those of the full test's own floating-point evaluation, the argument holds for the computed
 values as it does for the full test (:mod:`intervals.sonar.geometry`).
 
+Distances estimated first. The C library's ``hypot`` (about 16 ns a call) was most of a pair's
+cost. Every distance this test computes is only compared with a threshold (a segment's gap
+with ``hi``, ``lo`` or the reach, the farthest box point with ``lo``, the free-space distance
+with ``lo``), so each comparison is first made on the same operations with ``sqrt(x x + y y)``
+for ``hypot`` (:func:`_root`: within 4 units in the last place of ``hypot``'s value, itself
+within one). An estimate decides only when it clears the threshold by :data:`DECISION_SLACK`
+times ``1 + M`` (``M`` the magnitudes involved, m): about 9 000 times the largest difference
+the roots can make after the few roundings that follow them, so the decision is the exact
+functions' (and a branch of the gap at ``near_switch_m`` that the two could take differently
+goes to them too). Otherwise the exact functions decide: the rows are those of the exact
+evaluation, bit for bit (``test_sonar_pieces.py``), and every argument below applies
+unchanged. A sensor's half-diagonal ``hypot(hx, hy)`` is computed only where a comparison
+falls back to it.
+
 Shapes: ``pieces (N, 3, 2)`` and ``parents (P, 3, 2)``, piece ``n`` a part of parent
 ``n % P`` (the order in which :mod:`intervals.tighten` makes them). Float arrays float64 and
 C-contiguous.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
@@ -59,7 +75,6 @@ from intervals.sonar.cone import heading_trig
 from intervals.sonar.cone_kernel import (
     CX,
     CY,
-    DIAG,
     ECHO,
     FREE,
     HX,
@@ -79,42 +94,149 @@ PARAMS = (
     "arc_slack",
     "angle_margin_rad",
     "trig_limit_rad",
+    "decision_slack",
 )
 """The tolerances of :func:`piece_rejections_into`, in the order of its ``params`` array (those
-of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`)."""
+of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`, then :data:`DECISION_SLACK`)."""
 GUARD, NEAR_SWITCH = PARAMS.index("guard_m"), PARAMS.index("near_switch_m")
 APERTURE, MARGIN, ARC = (
     PARAMS.index(name) for name in ("half_aperture_rad", "margin_m", "arc_slack")
 )
 ANGLE_MARGIN, TRIG_LIMIT = PARAMS.index("angle_margin_rad"), PARAMS.index("trig_limit_rad")
+SLACK = PARAMS.index("decision_slack")
+
+DECISION_SLACK = 1e-12
+"""Relative margin of the comparisons decided on estimated distances (module doc, "Distances
+estimated first"): a comparison is taken from the estimates only when they clear its threshold
+by ``DECISION_SLACK (1 + M)``, ``M`` the sum of the magnitudes involved (m); about 9 000 times
+the error bound of the estimates (20 units in the last place of ``M``)."""
 
 
 @numba.njit(cache=True)
-def _rows(box, cos_theta, sin_theta, belt, params, rows):
-    """:func:`intervals.sonar.cone_kernel.sensor_rows` with the tolerances of ``params``."""
-    return cone_kernel.sensor_rows(
-        box,
-        cos_theta,
-        sin_theta,
-        belt,
-        params[0],
-        params[1],
-        params[2],
-        params[4],
-        params[5],
-        params[6],
-        rows,
+def _parent_rows(box, cos_theta, sin_theta, belt, params, rows):
+    """:func:`intervals.sonar.cone_kernel.sensor_rows` with the tolerances of ``params``, all but
+    the half-diagonals (no parent's is read)."""
+    full, half_turn, narrow, _ = cone_kernel.heading_flags(
+        box, params[APERTURE], params[ANGLE_MARGIN], params[TRIG_LIMIT]
     )
+    for i in range(belt.shape[0]):
+        cone_kernel.sensor_row(
+            box,
+            cos_theta,
+            sin_theta,
+            belt,
+            i,
+            full,
+            half_turn,
+            narrow,
+            params[MARGIN],
+            params[GUARD],
+            params[ARC],
+            rows,
+        )
+
+
+@numba.njit(cache=True, inline="always")
+def _root(x, y):
+    """``sqrt(x x + y y)``: ``hypot(x, y)`` within 4 units in its last place (one rounding of
+    each square, of the sum and of the root; ``hypot`` itself is within one), about ten times
+    cheaper than the C library's ``hypot``."""
+    return math.sqrt(x * x + y * y)
+
+
+@numba.njit(cache=True, inline="always")
+def _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack):
+    """``(gap, err)``: :func:`intervals.sonar.cone_kernel._segment_box_gap` in its order of
+    operations with :func:`_root` for ``hypot``, and a bound of its distance to the exact
+    function's value (``inf`` where the two may take different branches at
+    ``near_switch_m``)."""
+    ee = ex * ex + ey * ey
+    t = ((cx - ax) * ex + (cy - ay) * ey) / (ee if ee > 0 else 1.0)
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    qx, qy = ax + t * ex, ay + t * ey
+    dist = _root(qx - cx, qy - cy)
+    err = slack * (1.0 + dist + hx + hy)
+    if abs(dist - near_switch_m) <= err:
+        return dist, np.inf
+    if dist >= near_switch_m:
+        return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy), err
+    return dist - _root(hx, hy), err
 
 
 @numba.njit(cache=True)
-def _pair_flags(ax, ay, ex, ey, rows, i, lo, hi, echo, sure, hit, fires, guard_m, near_switch_m):
+def _gap_within(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, guard_m, limit, slack):
+    """``_segment_box_gap(...) - guard_m <= limit``, decided on :func:`_gap_estimate` when it
+    clears ``limit`` by its error bound and the slack, else on the exact function."""
+    gap, err = _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack)
+    err += slack * (1.0 + abs(limit))
+    if gap - guard_m <= limit - err:
+        return True
+    if gap - guard_m > limit + err:
+        return False
+    gap = cone_kernel._segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m)
+    return gap - guard_m <= limit
+
+
+@numba.njit(cache=True)
+def _far_reaches(p0x, p0y, p1x, p1y, cx, cy, hx, hy, guard_m, lo, slack):
+    """``max(far(p0), far(p1)) + guard_m >= lo``, ``far`` the farthest distance from the point
+    to the box ``(c, h)`` (:func:`intervals.sonar.cone_kernel._point_box_farthest`), decided on
+    :func:`_root` where it clears ``lo`` by the slack (the maximum of two sums is the sum of
+    the maximum, rounding being monotone), else on the exact functions."""
+    ux0, uy0 = abs(p0x - cx) + hx, abs(p0y - cy) + hy
+    f0 = _root(ux0, uy0)
+    err0 = slack * (1.0 + f0 + lo)
+    if f0 + guard_m >= lo + err0:
+        return True
+    ux1, uy1 = abs(p1x - cx) + hx, abs(p1y - cy) + hy
+    f1 = _root(ux1, uy1)
+    err1 = slack * (1.0 + f1 + lo)
+    if f1 + guard_m >= lo + err1:
+        return True
+    if f0 + guard_m < lo - err0 and f1 + guard_m < lo - err1:
+        return False
+    far = cone_kernel._max(math.hypot(ux0, uy0), math.hypot(ux1, uy1))
+    return far + guard_m >= lo
+
+
+@numba.njit(cache=True)
+def _free_fires(cx, cy, ax, ay, ex, ey, hx, hy, guard_m, lo, slack):
+    """``near + hypot(hx, hy) + guard_m < lo``, ``near`` the distance from ``c`` to the segment
+    ``a + t e`` (:func:`intervals.sonar.cone_kernel._nearest_distance`), decided on
+    :func:`_root` where it clears ``lo`` by the slack, else on the exact functions."""
+    ee = ex * ex + ey * ey
+    t = ((cx - ax) * ex + (cy - ay) * ey) / (ee if ee > 0 else 1.0)
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    dx, dy = ax + t * ex - cx, ay + t * ey - cy
+    near, diag = _root(dx, dy), _root(hx, hy)
+    err = slack * (1.0 + near + diag + lo)
+    value = near + diag + guard_m
+    if value < lo - err:
+        return True
+    if value >= lo + err:
+        return False
+    return math.hypot(dx, dy) + math.hypot(hx, hy) + guard_m < lo
+
+
+@numba.njit(cache=True)
+def _pair_flags(
+    ax, ay, ex, ey, rows, i, lo, hi, echo, sure, hit, fires, guard_m, near_switch_m, slack
+):
     """``(hit, fires)`` of sensor ``i`` (an echo ``[lo, hi]`` when ``echo``, else a free-space
     reading) after the segment ``a + t e``: the part of
     :func:`intervals.sonar.cone_kernel._segment_verdicts` that rejections read (``inner``
-    false: no ``close``, no ``sure_hit``), with its helpers in its order of operations, so the
-    flags are its flags (``test_sonar_pieces.py``: the rows of a parent tested as its own piece
-    are the full test's)."""
+    false: no ``close``, no ``sure_hit``), with its helpers in its order of operations, each
+    distance comparison decided on estimates where they clear it (:func:`_gap_within`,
+    :func:`_far_reaches`, :func:`_free_fires`), so the flags are its flags
+    (``test_sonar_pieces.py``: the rows of a parent tested as its own piece are the full
+    test's; the rows at a slack that leaves every comparison to the exact functions are the
+    rows at :data:`DECISION_SLACK`)."""
     t0, t1 = cone_kernel._clip(ax, ay, ex, ey, rows[i], UNION)
     if not t0 <= t1:
         return hit, fires
@@ -122,29 +244,33 @@ def _pair_flags(ax, ay, ex, ey, rows, i, lo, hi, echo, sure, hit, fires, guard_m
     if echo and not hit:
         p0x, p0y = ax + t0 * ex, ay + t0 * ey
         dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-        gap = cone_kernel._segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m)
-        if gap - guard_m <= hi:
-            far = cone_kernel._max(
-                cone_kernel._point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                cone_kernel._point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
-            )
-            hit = far + guard_m >= lo
+        if _gap_within(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m, guard_m, hi, slack):
+            hit = _far_reaches(p0x, p0y, p0x + dx, p0y + dy, cx, cy, hx, hy, guard_m, lo, slack)
     if sure:
         u0, u1 = cone_kernel._clip(ax, ay, ex, ey, rows[i], INTER)
         if u0 <= u1:
-            near = cone_kernel._nearest_distance(
-                cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-            )[2]
-            fires = fires or near + rows[i, DIAG] + guard_m < lo
+            fires = fires or _free_fires(
+                cx,
+                cy,
+                ax + u0 * ex,
+                ay + u0 * ey,
+                (u1 - u0) * ex,
+                (u1 - u0) * ey,
+                hx,
+                hy,
+                guard_m,
+                lo,
+                slack,
+            )
     return hit, fires
 
 
 @numba.njit(cache=True)
-def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switch_m, out):
+def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switch_m, slack, out):
     """The segments ``near[:count]`` (``(a, e)`` each) that can matter to sensor ``i`` for some
-    pose of the parent (``parent_rows``, :func:`_rows`): in its wedge half-planes, and within
-    ``hi`` (an echo) or ``lo`` (a no-echo reading) of its sensor box; into ``out[i]`` in the
-    order met. Returns how many."""
+    pose of the parent (``parent_rows``, :func:`_parent_rows`): in its wedge half-planes, and
+    within ``hi`` (an echo) or ``lo`` (a no-echo reading) of its sensor box (:func:`_gap_within`);
+    into ``out[i]`` in the order met. Returns how many."""
     limit = ranges[i, 1] if kind[i] == ECHO else ranges[i, 0]
     cx, cy = parent_rows[i, CX], parent_rows[i, CY]
     hx, hy = parent_rows[i, HX], parent_rows[i, HY]
@@ -154,21 +280,20 @@ def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switc
         t0, t1 = cone_kernel._clip(ax, ay, ex, ey, parent_rows[i], UNION)
         if not t0 <= t1:
             continue
-        dist_lb = (
-            cone_kernel._segment_box_gap(
-                ax + t0 * ex,
-                ay + t0 * ey,
-                (t1 - t0) * ex,
-                (t1 - t0) * ey,
-                cx,
-                cy,
-                hx,
-                hy,
-                near_switch_m,
-            )
-            - guard_m
-        )
-        if dist_lb <= limit:
+        if _gap_within(
+            ax + t0 * ex,
+            ay + t0 * ey,
+            (t1 - t0) * ex,
+            (t1 - t0) * ey,
+            cx,
+            cy,
+            hx,
+            hy,
+            near_switch_m,
+            guard_m,
+            limit,
+            slack,
+        ):
             out[i, kept, 0], out[i, kept, 1], out[i, kept, 2], out[i, kept, 3] = ax, ay, ex, ey
             kept += 1
     return kept
@@ -202,7 +327,7 @@ def piece_rejections_into(
     as :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`'s, with the ``parents (P, 3,
     2)`` and the ``cos``/``sin`` of their heading bounds beside the pieces', and the tolerances
     in ``params`` (:data:`PARAMS`)."""
-    guard_m, near_switch_m = params[GUARD], params[NEAR_SWITCH]
+    guard_m, near_switch_m, slack = params[GUARD], params[NEAR_SWITCH], params[SLACK]
     k, n_parents = belt.shape[0], parents.shape[0]
     rows, parent_rows = np.empty((k, SENSOR_COLUMNS)), np.empty((k, SENSOR_COLUMNS))
     impossible = np.empty(k, dtype=np.bool_)
@@ -219,7 +344,7 @@ def piece_rejections_into(
     order = np.arange(k)  # the order the sensors are tried in: the last to reject a piece first
     for p in range(n_parents):
         # the parent's sensor boxes and wedges, the segments within reach of their hull
-        _rows(parents[p], parent_cos[p], parent_sin[p], belt, params, parent_rows)
+        _parent_rows(parents[p], parent_cos[p], parent_sin[p], belt, params, parent_rows)
         hull_cx, hull_cy, hull_hx, hull_hy = cone_kernel.sensor_hull(parent_rows)
         ix0, ix1, iy0, iy1 = cone_kernel.reach_cells(
             hull_cx, hull_cy, hull_hx, hull_hy, visible, grid_origin, grid_cell_m, nx, ny
@@ -234,10 +359,20 @@ def piece_rejections_into(
                     seen[j] = p + 1
                     ax, ay = segments[j, 0, 0], segments[j, 0, 1]
                     ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-                    gap = cone_kernel._segment_box_gap(
-                        ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
-                    )
-                    if gap <= visible:
+                    if _gap_within(  # gap - 0.0 is the gap, bit for bit
+                        ax,
+                        ay,
+                        ex,
+                        ey,
+                        hull_cx,
+                        hull_cy,
+                        hull_hx,
+                        hull_hy,
+                        near_switch_m,
+                        0.0,
+                        visible,
+                        slack,
+                    ):
                         near[count, 0], near[count, 1] = ax, ay
                         near[count, 2], near[count, 3] = ex, ey
                         count += 1
@@ -272,6 +407,7 @@ def piece_rejections_into(
                         kind,
                         guard_m,
                         near_switch_m,
+                        slack,
                         pair_segments,
                     )
                     listed[i] = True
@@ -307,6 +443,7 @@ def piece_rejections_into(
                         fires,
                         guard_m,
                         near_switch_m,
+                        slack,
                     )
                     if cone_kernel._decided(echo, hit, fires, False, sure):
                         break  # no further pair can change this sensor's verdict
@@ -319,13 +456,18 @@ def piece_rejections_into(
 
 
 def piece_rejections(
-    pieces: np.ndarray, parents: np.ndarray, scan: SonarScan, enough: int | None = None
+    pieces: np.ndarray,
+    parents: np.ndarray,
+    scan: SonarScan,
+    enough: int | None = None,
+    slack: float | None = None,
 ) -> np.ndarray:
     """``reject (N, k)`` bool: sensor ``i`` rejects every pose of piece ``n`` (module doc), each
     piece ``pieces[n]`` a part of ``parents[n % P]`` (checked float64 boxes, e.g. the
     tightening's). ``enough``: a piece is left once that many of its sensors reject it (its
     other entries False: a caller counting more than ``q`` rejections passes ``q + 1``); None:
-    every row complete."""
+    every row complete. ``slack``: the :data:`DECISION_SLACK` to use (None: that one; a large
+    one leaves every distance comparison to the exact functions, the same rows)."""
     pieces, parents = np.ascontiguousarray(pieces), np.ascontiguousarray(parents)
     reject = np.empty((pieces.shape[0], scan.belt.count), dtype=bool)
     if pieces.shape[0] == 0:
@@ -358,6 +500,7 @@ def piece_rejections(
                 ARC_SLACK,
                 ANGLE_MARGIN_RAD,
                 ia.TRIG_EXACT_LIMIT_RAD,
+                DECISION_SLACK if slack is None else slack,
             ]
         ),
         belt.count + 1 if enough is None else int(enough),

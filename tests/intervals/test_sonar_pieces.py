@@ -158,3 +158,27 @@ def test_the_pieces_of_a_parent_inside_the_room_are_inside_it():
             assert np.array_equal(verdicts, expected)
             room_rejected += int(np.count_nonzero(by_room & ~by_sensors))
     assert inherited > 3000 and room_rejected > 500  # both paths seen
+
+
+def test_distances_decided_on_estimates_give_the_exact_rows():
+    """The comparisons decided on ``sqrt`` estimates (``DECISION_SLACK``) give the rows of the
+    exact functions (a slack so large that every comparison falls back to them), bit for bit,
+    complete or left at ``enough``; a slack of the wrong sign (estimates trusted 1 mm past their
+    threshold) changes rows, so the comparison sees the decisions."""
+    rng = np.random.default_rng(61)
+    changed = 0
+    for case in range(9):
+        scan, _, truth = random_scan_case(
+            rng, GAMMAS_RAD[case % 3], echoes_never_lost=bool(case % 2)
+        )
+        scan = _with_outliers(scan, rng, case % 3)
+        parents = _parents(truth, rng, 24)
+        pieces = parents
+        for _ in range(3):
+            pieces = np.concatenate(bisect(pieces, None))
+        for enough in (None, 2):
+            exact = piece_rejections(pieces, parents, scan, enough, slack=1e6)
+            assert np.array_equal(piece_rejections(pieces, parents, scan, enough), exact)
+            wrong = piece_rejections(pieces, parents, scan, enough, slack=-1e-3)
+            changed += int(np.count_nonzero(wrong != exact))
+    assert changed > 0
