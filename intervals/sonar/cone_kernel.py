@@ -157,12 +157,12 @@ def heading_flags(box, half_aperture_rad, angle_margin_rad, trig_limit_rad):
 
 
 @numba.njit(cache=True, inline="always")
-def sensor_row(
-    box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
-):
-    """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
-    those of :func:`heading_flags`; all but the half-diagonal ``DIAG`` (``hypot(hx, hy)``, which
-    :func:`sensor_rows` adds: :mod:`intervals.sonar.pieces` computes it only when needed)."""
+def turned_row(cos_theta, sin_theta, belt, i, full, half_turn, arc_slack):
+    """The part of row ``i`` of :func:`sensor_rows` that depends on the heading alone: the
+    mount's offset range ``(x_lo, x_hi, y_lo, y_hi)`` (m, the mount turned by every heading of
+    the box), then the unit vectors of the right wedge edge at ``theta_lo``, the left at
+    ``theta_hi``, the right at ``theta_hi`` and the left at ``theta_lo`` (``x, y`` each): a
+    12-tuple for :func:`placed_row`."""
     cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
     cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
     ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
@@ -176,30 +176,57 @@ def sensor_row(
     sin_min = -1.0 if reach_ny else _min(ay, by)
     sin_max = 1.0 if reach_py else _max(ay, by)
     r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
-    x_lo = box[0, 0] + _min(r_lo * cos_min, r_hi * cos_min) - margin_m
-    x_hi = box[0, 1] + _max(r_lo * cos_max, r_hi * cos_max) + margin_m
-    y_lo = box[1, 0] + _min(r_lo * sin_min, r_hi * sin_min) - margin_m
-    y_hi = box[1, 1] + _max(r_lo * sin_max, r_hi * sin_max) + margin_m
-    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
-    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
-    rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
     # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
     cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
     cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
-    right_lo_x, right_lo_y = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
-    right_hi_x, right_hi_y = cos_hi * cr - sin_hi * sr, sin_hi * cr + cos_hi * sr
-    left_lo_x, left_lo_y = cos_lo * cl - sin_lo * sl, sin_lo * cl + cos_lo * sl
-    left_hi_x, left_hi_y = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
+    return (
+        _min(r_lo * cos_min, r_hi * cos_min),
+        _max(r_lo * cos_max, r_hi * cos_max),
+        _min(r_lo * sin_min, r_hi * sin_min),
+        _max(r_lo * sin_max, r_hi * sin_max),
+        cos_lo * cr - sin_lo * sr,
+        sin_lo * cr + cos_lo * sr,
+        cos_hi * cl - sin_hi * sl,
+        sin_hi * cl + cos_hi * sl,
+        cos_hi * cr - sin_hi * sr,
+        sin_hi * cr + cos_hi * sr,
+        cos_lo * cl - sin_lo * sl,
+        sin_lo * cl + cos_lo * sl,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def placed_row(box, turned, i, narrow, margin_m, guard_m, rows):
+    """Row ``i`` of :func:`sensor_rows` for the pose box ``box (3, 2)`` from its heading's part
+    ``turned`` (:func:`turned_row`), all but the half-diagonal ``DIAG``."""
+    x_lo = box[0, 0] + turned[0] - margin_m
+    x_hi = box[0, 1] + turned[1] + margin_m
+    y_lo = box[1, 0] + turned[2] - margin_m
+    y_hi = box[1, 1] + turned[3] + margin_m
+    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
+    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
+    rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
     row = rows[i]
     # union of the wedges over the box (a superset; unused, c = -inf, unless narrow)
-    _wedge_planes(right_lo_x, right_lo_y, 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
-    _wedge_planes(left_hi_x, left_hi_y, -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
+    _wedge_planes(turned[4], turned[5], 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
+    _wedge_planes(turned[6], turned[7], -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
     if not narrow:
         row[UNION + 2] = -np.inf
         row[UNION + 5] = -np.inf
     # intersection of the wedges (a subset; used only when sure)
-    _wedge_planes(right_hi_x, right_hi_y, 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
-    _wedge_planes(left_lo_x, left_lo_y, -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+    _wedge_planes(turned[8], turned[9], 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
+    _wedge_planes(turned[10], turned[11], -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+
+
+@numba.njit(cache=True, inline="always")
+def sensor_row(
+    box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
+):
+    """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
+    those of :func:`heading_flags`; all but the half-diagonal ``DIAG`` (``hypot(hx, hy)``, which
+    :func:`sensor_rows` adds: :mod:`intervals.sonar.pieces` computes it only when needed)."""
+    turned = turned_row(cos_theta, sin_theta, belt, i, full, half_turn, arc_slack)
+    placed_row(box, turned, i, narrow, margin_m, guard_m, rows)
 
 
 @numba.njit(cache=True)
