@@ -284,15 +284,32 @@ def _pair_flags(
 
 @numba.njit(cache=True)
 def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switch_m, slack, out):
-    """The segments ``near[:count]`` (``(a, e)`` each) that can matter to sensor ``i`` for some
-    pose of the parent (``parent_rows``, :func:`_parent_rows`): in its wedge half-planes, and
-    within ``hi`` (an echo) or ``lo`` (a no-echo reading) of its sensor box (:func:`_gap_within`);
-    into ``out[i]`` in the order met. Returns how many."""
+    """The segments ``near[:count]`` (``(a, e)`` and the bounding box ``(x_lo, x_hi, y_lo,
+    y_hi)`` each) that can matter to sensor ``i`` for some pose of the parent (``parent_rows``,
+    :func:`_parent_rows`): in its wedge half-planes, and within ``hi`` (an echo) or ``lo`` (a
+    no-echo reading) of its sensor box (:func:`_gap_within`); into ``out[i]`` in the order met.
+    Returns how many.
+
+    A segment whose bounding box lies farther than ``limit + guard_m + hx + hy`` from the
+    sensor box's centre along x or y (by more than the slack, which covers the few ulps of 1e3
+    m its clipped points and their distance may be off) is left out first, without its clip:
+    the gap of any part of it is at least its distance from the centre less ``hx + hy`` (the
+    most :func:`intervals.sonar.cone_kernel._segment_box_gap` takes off), so it would fail the
+    distance test."""
     limit = ranges[i, 1] if kind[i] == ECHO else ranges[i, 0]
     cx, cy = parent_rows[i, CX], parent_rows[i, CY]
     hx, hy = parent_rows[i, HX], parent_rows[i, HY]
+    far = limit + guard_m + hx + hy
+    far += slack * (1.0 + abs(cx) + abs(cy) + abs(far)) * 8.0
     kept = 0
     for c in range(count):
+        if (
+            near[c, 4] - cx > far
+            or cx - near[c, 5] > far
+            or near[c, 6] - cy > far
+            or cy - near[c, 7] > far
+        ):
+            continue
         ax, ay, ex, ey = near[c, 0], near[c, 1], near[c, 2], near[c, 3]
         t0, t1 = cone_kernel._clip(ax, ay, ex, ey, parent_rows[i], UNION)
         if not t0 <= t1:
@@ -353,7 +370,7 @@ def piece_rejections_into(
     visible = reach_m + guard_m
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # parent number + 1 of the last visit
-    near = np.empty((segments.shape[0], 4))  # the parent's segments within reach: (a, e)
+    near = np.empty((segments.shape[0], 8))  # the parent's segments within reach: a, e, box
     # per sensor, those of its pairs the parent leaves (a, e), listed when a piece first asks
     listed = np.empty(k, dtype=np.bool_)
     pair_count = np.empty(k, dtype=np.int64)
@@ -398,6 +415,10 @@ def piece_rejections_into(
                     ):
                         near[count, 0], near[count, 1] = ax, ay
                         near[count, 2], near[count, 3] = ex, ey
+                        near[count, 4] = min(ax, segments[j, 1, 0])
+                        near[count, 5] = max(ax, segments[j, 1, 0])
+                        near[count, 6] = min(ay, segments[j, 1, 1])
+                        near[count, 7] = max(ay, segments[j, 1, 1])
                         count += 1
         listed[:] = False
         # each piece of this parent on those pairs only, sensor by sensor (the verdicts of a
