@@ -43,19 +43,11 @@ firing on a pair ruled out by the parent would have rejected it). The parent's b
 those of the full test's own floating-point evaluation, the argument holds for the computed
 values as it does for the full test (:mod:`intervals.sonar.geometry`).
 
-Distances estimated first. The C library's ``hypot`` (about 16 ns a call) was most of a pair's
-cost. Every distance this test computes is only compared with a threshold (a segment's gap
-with ``hi``, ``lo`` or the reach, the farthest box point with ``lo``, the free-space distance
-with ``lo``), so each comparison is first made on the same operations with ``sqrt(x x + y y)``
-for ``hypot`` (:func:`_root`: within 4 units in the last place of ``hypot``'s value, itself
-within one). An estimate decides only when it clears the threshold by :data:`DECISION_SLACK`
-times ``1 + M`` (``M`` the magnitudes involved, m): about 9 000 times the largest difference
-the roots can make after the few roundings that follow them, so the decision is the exact
-functions' (and a branch of the gap at ``near_switch_m`` that the two could take differently
-goes to them too). Otherwise the exact functions decide: the rows are those of the exact
-evaluation, bit for bit (``test_sonar_pieces.py``), and every argument below applies
-unchanged. A sensor's half-diagonal ``hypot(hx, hy)`` is computed only where a comparison
-falls back to it.
+Distances estimated first (:mod:`intervals.sonar.cone_kernel`, the same section): every
+distance comparison here (a segment's gap with ``hi``, ``lo`` or the reach, the farthest box
+point with ``lo``, the free-space bound with ``lo``) is decided on ``sqrt`` estimates where
+they clear it, else on ``hypot``; the rows are those of the exact evaluation, bit for bit,
+and the argument above applies unchanged. ``hypot`` was most of a pair's cost.
 
 Shapes: ``pieces (N, 3, 2)`` and ``parents (P, 3, 2)``, piece ``n`` a part of parent
 ``n % P`` (the order in which :mod:`intervals.tighten` makes them). Float arrays float64 and
@@ -63,8 +55,6 @@ C-contiguous.
 """
 
 from __future__ import annotations
-
-import math
 
 import numba
 import numpy as np
@@ -98,7 +88,8 @@ PARAMS = (
     "decision_slack",
 )
 """The tolerances of :func:`piece_rejections_into`, in the order of its ``params`` array (those
-of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`, then :data:`DECISION_SLACK`)."""
+of :func:`intervals.sonar.cone_kernel.sensor_verdicts_into`, then the slack of the comparisons
+decided on estimates, :data:`~intervals.sonar.cone_kernel.DECISION_SLACK` in production)."""
 GUARD, NEAR_SWITCH = PARAMS.index("guard_m"), PARAMS.index("near_switch_m")
 APERTURE, MARGIN, ARC = (
     PARAMS.index(name) for name in ("half_aperture_rad", "margin_m", "arc_slack")
@@ -113,12 +104,6 @@ of a parent hold two or three headings (about 70 % of the pieces share one with 
 tested before them on ``corridor``, ``office_floor`` and ``apartment``). A slot is reused only
 for the same heading bounds and the same cosines and sines of them, bit for bit (all that
 part reads of a piece): the values a piece would compute alone."""
-
-DECISION_SLACK = 1e-12
-"""Relative margin of the comparisons decided on estimated distances (module doc, "Distances
-estimated first"): a comparison is taken from the estimates only when they clear its threshold
-by ``DECISION_SLACK (1 + M)``, ``M`` the sum of the magnitudes involved (m); about 9 000 times
-the error bound of the estimates (20 units in the last place of ``M``)."""
 
 
 @numba.njit(cache=True)
@@ -153,94 +138,6 @@ def _kept_turned(turned, s, i):
     return (t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], t[9], t[10], t[11])
 
 
-@numba.njit(cache=True, inline="always")
-def _root(x, y):
-    """``sqrt(x x + y y)``: ``hypot(x, y)`` within 4 units in its last place (one rounding of
-    each square, of the sum and of the root; ``hypot`` itself is within one), about ten times
-    cheaper than the C library's ``hypot``."""
-    return math.sqrt(x * x + y * y)
-
-
-@numba.njit(cache=True, inline="always")
-def _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack):
-    """``(gap, err)``: :func:`intervals.sonar.cone_kernel._segment_box_gap` in its order of
-    operations with :func:`_root` for ``hypot``, and a bound of its distance to the exact
-    function's value (``inf`` where the two may take different branches at
-    ``near_switch_m``)."""
-    ee = ex * ex + ey * ey
-    t = ((cx - ax) * ex + (cy - ay) * ey) / (ee if ee > 0 else 1.0)
-    if t < 0.0:
-        t = 0.0
-    elif t > 1.0:
-        t = 1.0
-    qx, qy = ax + t * ex, ay + t * ey
-    dist = _root(qx - cx, qy - cy)
-    err = slack * (1.0 + dist + hx + hy)
-    if abs(dist - near_switch_m) <= err:
-        return dist, np.inf
-    if dist >= near_switch_m:
-        return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy), err
-    return dist - _root(hx, hy), err
-
-
-@numba.njit(cache=True)
-def _gap_within(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, guard_m, limit, slack):
-    """``_segment_box_gap(...) - guard_m <= limit``, decided on :func:`_gap_estimate` when it
-    clears ``limit`` by its error bound and the slack, else on the exact function."""
-    gap, err = _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack)
-    err += slack * (1.0 + abs(limit))
-    if gap - guard_m <= limit - err:
-        return True
-    if gap - guard_m > limit + err:
-        return False
-    gap = cone_kernel._segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m)
-    return gap - guard_m <= limit
-
-
-@numba.njit(cache=True)
-def _far_reaches(p0x, p0y, p1x, p1y, cx, cy, hx, hy, guard_m, lo, slack):
-    """``max(far(p0), far(p1)) + guard_m >= lo``, ``far`` the farthest distance from the point
-    to the box ``(c, h)`` (:func:`intervals.sonar.cone_kernel._point_box_farthest`), decided on
-    :func:`_root` where it clears ``lo`` by the slack (the maximum of two sums is the sum of
-    the maximum, rounding being monotone), else on the exact functions."""
-    ux0, uy0 = abs(p0x - cx) + hx, abs(p0y - cy) + hy
-    f0 = _root(ux0, uy0)
-    err0 = slack * (1.0 + f0 + lo)
-    if f0 + guard_m >= lo + err0:
-        return True
-    ux1, uy1 = abs(p1x - cx) + hx, abs(p1y - cy) + hy
-    f1 = _root(ux1, uy1)
-    err1 = slack * (1.0 + f1 + lo)
-    if f1 + guard_m >= lo + err1:
-        return True
-    if f0 + guard_m < lo - err0 and f1 + guard_m < lo - err1:
-        return False
-    far = cone_kernel._max(math.hypot(ux0, uy0), math.hypot(ux1, uy1))
-    return far + guard_m >= lo
-
-
-@numba.njit(cache=True)
-def _free_fires(cx, cy, ax, ay, ex, ey, hx, hy, guard_m, lo, slack):
-    """``near + hypot(hx, hy) + guard_m < lo``, ``near`` the distance from ``c`` to the segment
-    ``a + t e`` (:func:`intervals.sonar.cone_kernel._nearest_distance`), decided on
-    :func:`_root` where it clears ``lo`` by the slack, else on the exact functions."""
-    ee = ex * ex + ey * ey
-    t = ((cx - ax) * ex + (cy - ay) * ey) / (ee if ee > 0 else 1.0)
-    if t < 0.0:
-        t = 0.0
-    elif t > 1.0:
-        t = 1.0
-    dx, dy = ax + t * ex - cx, ay + t * ey - cy
-    near, diag = _root(dx, dy), _root(hx, hy)
-    err = slack * (1.0 + near + diag + lo)
-    value = near + diag + guard_m
-    if value < lo - err:
-        return True
-    if value >= lo + err:
-        return False
-    return math.hypot(dx, dy) + math.hypot(hx, hy) + guard_m < lo
-
-
 @numba.njit(cache=True)
 def _pair_flags(
     ax, ay, ex, ey, rows, i, lo, hi, echo, sure, hit, fires, guard_m, near_switch_m, slack
@@ -249,11 +146,12 @@ def _pair_flags(
     reading) after the segment ``a + t e``: the part of
     :func:`intervals.sonar.cone_kernel._segment_verdicts` that rejections read (``inner``
     false: no ``close``, no ``sure_hit``), with its helpers in its order of operations, each
-    distance comparison decided on estimates where they clear it (:func:`_gap_within`,
-    :func:`_far_reaches`, :func:`_free_fires`), so the flags are its flags
+    distance comparison decided on estimates where they clear it (the ``_gap_within``,
+    ``_far_reaches`` and ``_far_bound`` of :mod:`intervals.sonar.cone_kernel`), so the flags
+    are its flags
     (``test_sonar_pieces.py``: the rows of a parent tested as its own piece are the full
     test's; the rows at a slack that leaves every comparison to the exact functions are the
-    rows at :data:`DECISION_SLACK`)."""
+    rows at :data:`~intervals.sonar.cone_kernel.DECISION_SLACK`)."""
     t0, t1 = cone_kernel._clip(ax, ay, ex, ey, rows[i], UNION)
     if not t0 <= t1:
         return hit, fires
@@ -261,12 +159,16 @@ def _pair_flags(
     if echo and not hit:
         p0x, p0y = ax + t0 * ex, ay + t0 * ey
         dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-        if _gap_within(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m, guard_m, hi, slack):
-            hit = _far_reaches(p0x, p0y, p0x + dx, p0y + dy, cx, cy, hx, hy, guard_m, lo, slack)
+        if cone_kernel._gap_within(
+            p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m, guard_m, hi, slack
+        ):
+            hit = cone_kernel._far_reaches(
+                p0x, p0y, p0x + dx, p0y + dy, cx, cy, hx, hy, guard_m, lo, slack
+            )
     if sure:
         u0, u1 = cone_kernel._clip(ax, ay, ex, ey, rows[i], INTER)
         if u0 <= u1:
-            fires = fires or _free_fires(
+            bound = cone_kernel._far_bound(
                 cx,
                 cy,
                 ax + u0 * ex,
@@ -277,8 +179,10 @@ def _pair_flags(
                 hy,
                 guard_m,
                 lo,
+                lo,
                 slack,
             )
+            fires = fires or bound < lo
     return hit, fires
 
 
@@ -287,8 +191,8 @@ def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switc
     """The segments ``near[:count]`` (``(a, e)`` and the bounding box ``(x_lo, x_hi, y_lo,
     y_hi)`` each) that can matter to sensor ``i`` for some pose of the parent (``parent_rows``,
     :func:`_parent_rows`): in its wedge half-planes, and within ``hi`` (an echo) or ``lo`` (a
-    no-echo reading) of its sensor box (:func:`_gap_within`); into ``out[i]`` in the order met.
-    Returns how many.
+    no-echo reading) of its sensor box (:func:`~intervals.sonar.cone_kernel._gap_within`); into
+    ``out[i]`` in the order met. Returns how many.
 
     A segment whose bounding box lies farther than ``limit + guard_m + hx + hy`` from the
     sensor box's centre along x or y (by more than the slack, which covers the few ulps of 1e3
@@ -314,7 +218,7 @@ def _parent_pairs(near, count, parent_rows, i, ranges, kind, guard_m, near_switc
         t0, t1 = cone_kernel._clip(ax, ay, ex, ey, parent_rows[i], UNION)
         if not t0 <= t1:
             continue
-        if _gap_within(
+        if cone_kernel._gap_within(
             ax + t0 * ex,
             ay + t0 * ey,
             (t1 - t0) * ex,
@@ -399,7 +303,7 @@ def piece_rejections_into(
                     seen[j] = p + 1
                     ax, ay = segments[j, 0, 0], segments[j, 0, 1]
                     ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-                    if _gap_within(  # gap - 0.0 is the gap, bit for bit
+                    if cone_kernel._gap_within(  # gap - 0.0 is the gap, bit for bit
                         ax,
                         ay,
                         ex,
@@ -523,8 +427,9 @@ def piece_rejections(
     piece ``pieces[n]`` a part of ``parents[n % P]`` (checked float64 boxes, e.g. the
     tightening's). ``enough``: a piece is left once that many of its sensors reject it (its
     other entries False: a caller counting more than ``q`` rejections passes ``q + 1``); None:
-    every row complete. ``slack``: the :data:`DECISION_SLACK` to use (None: that one; a large
-    one leaves every distance comparison to the exact functions, the same rows)."""
+    every row complete. ``slack``: of the comparisons decided on estimates (None:
+    :data:`~intervals.sonar.cone_kernel.DECISION_SLACK`; a large one leaves every distance
+    comparison to the exact functions, the same rows)."""
     pieces, parents = np.ascontiguousarray(pieces), np.ascontiguousarray(parents)
     reject = np.empty((pieces.shape[0], scan.belt.count), dtype=bool)
     if pieces.shape[0] == 0:
@@ -557,7 +462,7 @@ def piece_rejections(
                 ARC_SLACK,
                 ANGLE_MARGIN_RAD,
                 ia.TRIG_EXACT_LIMIT_RAD,
-                DECISION_SLACK if slack is None else slack,
+                cone_kernel.DECISION_SLACK if slack is None else slack,
             ]
         ),
         belt.count + 1 if enough is None else int(enough),
