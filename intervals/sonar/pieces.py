@@ -24,10 +24,13 @@ rejected the last piece is tried first (siblings and neighbours are often reject
 same sensor), and a sensor's box and wedges (:func:`intervals.sonar.cone_kernel.sensor_row`)
 and its pair list are built only when a piece reaches it.
 
-Cost (``benchmarks/piece_replay.py``: the tightening's calls at 9 levels, ``enough = q + 1 =
-2`` as the tracker has it; BENCHMARKS.md, "The piece test sensor by sensor"): 0.79 us a piece
-on ``hall`` (1.35 before), 0.92 on ``office`` (1.58), 1.09 on ``apartment`` (2.19), 1.22 on
-``corridor`` (1.82); complete rows (``enough`` None) cost about as before.
+Cost (``benchmarks/piece_replay.py``: the tightening's calls, ``enough = q + 1 = 2`` as the
+tracker has it): at 9 levels 0.79 us a piece on ``hall`` (1.35 before the sensor-by-sensor
+test), 0.92 on ``office``, 1.09 on ``apartment``, 1.22 on ``corridor`` (BENCHMARKS.md, "The
+piece test sensor by sensor"); at 12 levels with the distances estimated first, the heading
+parts of the rows kept and the bounding-box cut of the parent's pairs, 0.55 to 0.73 us
+against 0.76 to 1.05 (1.39 to 1.51 times cheaper; BENCHMARKS.md, "The tightening pass per
+piece").
 
 Soundness. A sensor rejects a piece when no remaining pair passes the piece's hit test, or
 when the free-space test fires on one. (1) A pair the parent ruled out cannot hold the
