@@ -113,7 +113,7 @@ def _test_and_counts(boxes, scan: SonarScan, q: int, inner: bool, probe=None, pa
             # GUARD_M of its rectangle, a part of the parent's; the segment between the two
             # centres crosses no edge, so the ray casts from them, both more than GUARD_M from
             # every edge, agree): its verdict is the one room_verdicts would give, so only the
-            # pieces of the other parents are tested (corridor, 12 levels: 0.17 to 0.03 us a
+            # pieces of the other parents are tested (corridor, 12 levels: 0.16 to 0.04 us a
             # piece; BENCHMARKS.md, "The tightening pass per piece")
             parent_in = room_verdicts(parents, scan.boundary)[1]
             live = live[~parent_in[live % parents.shape[0]]]

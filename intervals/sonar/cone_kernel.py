@@ -144,7 +144,7 @@ def _root(x, y):
 
 @numba.njit(cache=True, inline="always")
 def _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack):
-    """``(gap, err)``: :func:`intervals.sonar._segment_box_gap` in its order of
+    """``(gap, err)``: :func:`_segment_box_gap` in its order of
     operations with :func:`_root` for ``hypot``, and a bound of its distance to the exact
     function's value (``inf`` where the two may take different branches at
     ``near_switch_m``)."""
@@ -181,7 +181,7 @@ def _gap_within(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, guard_m, limit, s
 @numba.njit(cache=True)
 def _far_reaches(p0x, p0y, p1x, p1y, cx, cy, hx, hy, guard_m, lo, slack):
     """``max(far(p0), far(p1)) + guard_m >= lo``, ``far`` the farthest distance from the point
-    to the box ``(c, h)`` (:func:`intervals.sonar._point_box_farthest`), decided on
+    to the box ``(c, h)`` (:func:`_point_box_farthest`), decided on
     :func:`_root` where it clears ``lo`` by the slack (the maximum of two sums is the sum of
     the maximum, rounding being monotone), else on the exact functions."""
     ux0, uy0 = abs(p0x - cx) + hx, abs(p0y - cy) + hy

@@ -111,26 +111,20 @@ part reads of a piece): the values a piece would compute alone."""
 
 @numba.njit(cache=True)
 def _parent_rows(box, cos_theta, sin_theta, belt, params, rows):
-    """:func:`intervals.sonar.cone_kernel.sensor_rows` with the tolerances of ``params``, all but
-    the half-diagonals (no parent's is read)."""
-    full, half_turn, narrow, _ = cone_kernel.heading_flags(
-        box, params[APERTURE], params[ANGLE_MARGIN], params[TRIG_LIMIT]
+    """:func:`intervals.sonar.cone_kernel.sensor_rows` with the tolerances of ``params``."""
+    return cone_kernel.sensor_rows(
+        box,
+        cos_theta,
+        sin_theta,
+        belt,
+        params[APERTURE],
+        params[MARGIN],
+        params[GUARD],
+        params[ARC],
+        params[ANGLE_MARGIN],
+        params[TRIG_LIMIT],
+        rows,
     )
-    for i in range(belt.shape[0]):
-        cone_kernel.sensor_row(
-            box,
-            cos_theta,
-            sin_theta,
-            belt,
-            i,
-            full,
-            half_turn,
-            narrow,
-            params[MARGIN],
-            params[GUARD],
-            params[ARC],
-            rows,
-        )
 
 
 @numba.njit(cache=True, inline="always")
