@@ -91,30 +91,30 @@ def _min(a: float, b: float) -> float:
     return b
 
 
-@numba.njit(cache=True)
-def _nearest_distance(px, py, ax, ay, ex, ey):
-    """``(qx, qy, dist)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p``
-    (as ``intervals.sonar.geometry.nearest_on_segment``)."""
+@numba.njit(cache=True, inline="always")
+def _nearest_point(px, py, ax, ay, ex, ey):
+    """``(qx, qy)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p`` (as
+    ``intervals.sonar.geometry.nearest_on_segment``)."""
     ee = ex * ex + ey * ey
     t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
     if t < 0.0:
         t = 0.0
     elif t > 1.0:
         t = 1.0
-    qx, qy = ax + t * ex, ay + t * ey
+    return ax + t * ex, ay + t * ey
+
+
+@numba.njit(cache=True)
+def _nearest_distance(px, py, ax, ay, ex, ey):
+    """``(qx, qy, dist)``: :func:`_nearest_point` and its distance to ``p``."""
+    qx, qy = _nearest_point(px, py, ax, ay, ex, ey)
     return qx, qy, math.hypot(qx - px, qy - py)
 
 
 @numba.njit(cache=True, inline="always")
 def _nearest_estimate(px, py, ax, ay, ex, ey):
     """``(qx, qy, dist)`` of :func:`_nearest_distance` with :func:`_root` for ``hypot``."""
-    ee = ex * ex + ey * ey
-    t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
-    if t < 0.0:
-        t = 0.0
-    elif t > 1.0:
-        t = 1.0
-    qx, qy = ax + t * ex, ay + t * ey
+    qx, qy = _nearest_point(px, py, ax, ay, ex, ey)
     return qx, qy, _root(qx - px, qy - py)
 
 
