@@ -12,7 +12,9 @@ replays every call through this checkout's kernel and through ``TREE``'s (one ch
 per tree, the trees alternating round by round; a tree whose kernel takes no ``enough``
 argument computes complete rows), reports whether the verdicts agree (each piece rejected by
 at least ``enough`` sensors in both, and the same row where fewer) and per plan the minimum
-over ``--repeat`` rounds of the process CPU time of all calls, in us a piece.
+over ``--repeat`` rounds of the process CPU time of all calls, in us a piece. Both trees are
+handed the recorded ``params`` array: record with the tree whose kernel reads the longer one
+(since session 28 the piece kernel reads an eighth tolerance, the decision slack).
 """
 
 from __future__ import annotations

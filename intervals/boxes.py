@@ -70,19 +70,55 @@ def bisect(
     axes not ``idle (N, d)`` when given (among all when every axis of a box is idle).
 
     Returns ``(left, right)``, each ``(N, d, 2)``; they share the cut value, so their union is
-    exactly the parent box.
+    exactly the parent box. Compiled (:func:`_bisect_into`): the values of the numpy
+    expressions ``widths``, ``np.argmax`` and ``centres``, bit for bit, about five times faster
+    on the tightening's few hundred boxes a call.
     """
-    n = boxes.shape[0]
-    w = widths(boxes, scale)
-    if idle is not None:  # widths are >= 0: an idle axis (-1) is never the widest of the others
-        w = np.where(idle & ~np.all(idle, axis=1, keepdims=True), -1.0, w)
-    axis = np.argmax(w, axis=-1)
-    rows = np.arange(n)
-    cut = centres(boxes)[rows, axis]
-    left, right = boxes.copy(), boxes.copy()
-    left[rows, axis, 1] = cut
-    right[rows, axis, 0] = cut
+    boxes = np.ascontiguousarray(boxes, dtype=np.float64)
+    left, right = np.empty_like(boxes), np.empty_like(boxes)
+    _bisect_into(
+        boxes,
+        np.ones(boxes.shape[1]) if scale is None else np.asarray(scale, dtype=np.float64),
+        scale is not None,
+        np.zeros((0, 0), dtype=bool) if idle is None else np.ascontiguousarray(idle, dtype=bool),
+        idle is not None,
+        left,
+        right,
+    )
     return left, right
+
+
+@numba.njit(cache=True)
+def _bisect_into(boxes, scale, scaled, idle, has_idle, left, right):
+    """:func:`bisect` into ``left, right (N, d, 2)``: per box the widths ``hi - lo`` (times
+    ``scale (d,)`` when ``scaled``), ``-1`` on the axes ``idle (N, d)`` (when ``has_idle``)
+    unless every axis is idle, the first largest (a NaN width first, as ``np.argmax``), cut at
+    ``lo + (hi - lo) / 2``."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    for b in range(n):
+        all_idle = has_idle
+        if has_idle:
+            for a in range(d):
+                all_idle = all_idle and idle[b, a]
+        best, best_w = 0, -np.inf
+        for a in range(d):
+            w = boxes[b, a, 1] - boxes[b, a, 0]
+            if scaled:
+                w = w * scale[a]
+            if has_idle and idle[b, a] and not all_idle:
+                w = -1.0
+            if w != w:  # NaN: np.argmax's pick
+                best = a
+                break
+            if a == 0 or w > best_w:
+                best, best_w = a, w
+        for a in range(d):
+            left[b, a, 0], left[b, a, 1] = boxes[b, a, 0], boxes[b, a, 1]
+            right[b, a, 0], right[b, a, 1] = boxes[b, a, 0], boxes[b, a, 1]
+        lo, hi = boxes[b, best, 0], boxes[b, best, 1]
+        cut = lo + (hi - lo) / 2.0
+        left[b, best, 1] = cut
+        right[b, best, 0] = cut
 
 
 def inflate(boxes: np.ndarray, margin) -> np.ndarray:

@@ -25,6 +25,22 @@ both, ``abs``, ``min`` and ``max`` are exact. So every verdict equals the refere
 and every guarantee of :mod:`intervals.sonar.cone` holds unchanged; the tests check equality over
 random cases.
 
+Distances estimated first. Every distance the kernels compute is only compared with a
+threshold (a gap with ``hi``, ``lo`` or the reach, a farthest distance with ``lo``, the
+free-space bound with ``lo`` and ``hi``), and the C library's ``hypot`` costs about 16 ns a
+call against under 2 for ``sqrt(x x + y y)`` (:func:`_root`: within 4 units in the last place
+of ``hypot``'s value, itself within one). So each comparison is first made on the same
+operations with :func:`_root` for ``hypot`` (:func:`_gap_estimate`, :func:`_gap_within`,
+:func:`_far_reaches`, :func:`_far_bound`), and decided there only when the estimate clears the
+threshold by :data:`DECISION_SLACK` times ``1 + M`` (``M`` the magnitudes involved, m): about
+9 000 times the largest difference the roots can make after the few roundings that follow
+them. Otherwise (and where the two could take different branches of the gap at
+``near_switch_m``) the exact functions decide. Every verdict is therefore the exact
+evaluation's, bit for bit (the reference tests below; ``benchmarks/cone_kernel_replay.py``:
+identical outputs, 17 to 20 % less CPU on recorded ``corridor`` and ``apartment`` calls). The
+sensor box's half-diagonal ``hypot(hx, hy)`` is estimated the same way, so the rows no longer
+hold it.
+
 Shapes and units: ``N`` boxes ``(N, 3, 2)`` (x m, y m, theta rad; lower, upper), ``m`` segments
 ``(m, 2, 2)`` world frame m, ``k`` sensors. Every float array is float64 and C-contiguous, the
 kinds int8 and the outputs bool: one compiled signature. The machine code is cached beside the
@@ -46,12 +62,17 @@ IGNORED, ECHO, FREE = 0, 1, 2
 COS_BETA, SIN_BETA, R_LO, R_HI, COS_RIGHT, SIN_RIGHT, COS_LEFT, SIN_LEFT = range(8)
 
 # columns of the per-sensor scratch rows of one box: sensor box, union and intersection
-# half-planes (nx, ny, c) x 2 each, the sensor box's half-diagonal hypot(hx, hy) m
+# half-planes (nx, ny, c) x 2 each
 CX, CY, HX, HY = range(4)
 UNION = 4
 INTER = 10
-DIAG = 16
-SENSOR_COLUMNS = 17
+SENSOR_COLUMNS = 16
+
+DECISION_SLACK = 1e-12
+"""Relative margin of the distance comparisons decided on ``sqrt`` estimates (module doc,
+"Distances estimated first"): a comparison is taken from the estimates only when they clear
+its threshold by ``DECISION_SLACK (1 + M)``, ``M`` the sum of the magnitudes involved (m);
+about 9 000 times the error bound of the estimates (20 units in the last place of ``M``)."""
 
 
 @numba.njit(cache=True)
@@ -70,18 +91,31 @@ def _min(a: float, b: float) -> float:
     return b
 
 
-@numba.njit(cache=True)
-def _nearest_distance(px, py, ax, ay, ex, ey):
-    """``(qx, qy, dist)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p``
-    (as ``intervals.sonar.geometry.nearest_on_segment``)."""
+@numba.njit(cache=True, inline="always")
+def _nearest_point(px, py, ax, ay, ex, ey):
+    """``(qx, qy)``: nearest point of the segment ``a + t e`` (t in [0, 1]) to ``p`` (as
+    ``intervals.sonar.geometry.nearest_on_segment``)."""
     ee = ex * ex + ey * ey
     t = ((px - ax) * ex + (py - ay) * ey) / (ee if ee > 0 else 1.0)
     if t < 0.0:
         t = 0.0
     elif t > 1.0:
         t = 1.0
-    qx, qy = ax + t * ex, ay + t * ey
+    return ax + t * ex, ay + t * ey
+
+
+@numba.njit(cache=True)
+def _nearest_distance(px, py, ax, ay, ex, ey):
+    """``(qx, qy, dist)``: :func:`_nearest_point` and its distance to ``p``."""
+    qx, qy = _nearest_point(px, py, ax, ay, ex, ey)
     return qx, qy, math.hypot(qx - px, qy - py)
+
+
+@numba.njit(cache=True, inline="always")
+def _nearest_estimate(px, py, ax, ay, ex, ey):
+    """``(qx, qy, dist)`` of :func:`_nearest_distance` with :func:`_root` for ``hypot``."""
+    qx, qy = _nearest_point(px, py, ax, ay, ex, ey)
+    return qx, qy, _root(qx - px, qy - py)
 
 
 @numba.njit(cache=True)
@@ -98,6 +132,88 @@ def _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m):
 def _point_box_farthest(px, py, cx, cy, hx, hy):
     """Largest distance from the point ``p`` to the points of the box ``(c, h)``."""
     return math.hypot(abs(px - cx) + hx, abs(py - cy) + hy)
+
+
+@numba.njit(cache=True, inline="always")
+def _root(x, y):
+    """``sqrt(x x + y y)``: ``hypot(x, y)`` within 4 units in its last place (one rounding of
+    each square, of the sum and of the root; ``hypot`` itself is within one), about ten times
+    cheaper than the C library's ``hypot``."""
+    return math.sqrt(x * x + y * y)
+
+
+@numba.njit(cache=True, inline="always")
+def _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack):
+    """``(gap, err)``: :func:`_segment_box_gap` in its order of
+    operations with :func:`_root` for ``hypot``, and a bound of its distance to the exact
+    function's value (``inf`` where the two may take different branches at
+    ``near_switch_m``)."""
+    ee = ex * ex + ey * ey
+    t = ((cx - ax) * ex + (cy - ay) * ey) / (ee if ee > 0 else 1.0)
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    qx, qy = ax + t * ex, ay + t * ey
+    dist = _root(qx - cx, qy - cy)
+    err = slack * (1.0 + dist + hx + hy)
+    if abs(dist - near_switch_m) <= err:
+        return dist, np.inf
+    if dist >= near_switch_m:
+        return dist - (abs(qx - cx) / dist * hx + abs(qy - cy) / dist * hy), err
+    return dist - _root(hx, hy), err
+
+
+@numba.njit(cache=True)
+def _gap_within(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, guard_m, limit, slack):
+    """``_segment_box_gap(...) - guard_m <= limit``, decided on :func:`_gap_estimate` when it
+    clears ``limit`` by its error bound and the slack, else on the exact function."""
+    gap, err = _gap_estimate(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m, slack)
+    err += slack * (1.0 + abs(limit))
+    if gap - guard_m <= limit - err:
+        return True
+    if gap - guard_m > limit + err:
+        return False
+    gap = _segment_box_gap(ax, ay, ex, ey, cx, cy, hx, hy, near_switch_m)
+    return gap - guard_m <= limit
+
+
+@numba.njit(cache=True)
+def _far_reaches(p0x, p0y, p1x, p1y, cx, cy, hx, hy, guard_m, lo, slack):
+    """``max(far(p0), far(p1)) + guard_m >= lo``, ``far`` the farthest distance from the point
+    to the box ``(c, h)`` (:func:`_point_box_farthest`), decided on
+    :func:`_root` where it clears ``lo`` by the slack (the maximum of two sums is the sum of
+    the maximum, rounding being monotone), else on the exact functions."""
+    ux0, uy0 = abs(p0x - cx) + hx, abs(p0y - cy) + hy
+    f0 = _root(ux0, uy0)
+    err0 = slack * (1.0 + f0 + lo)
+    if f0 + guard_m >= lo + err0:
+        return True
+    ux1, uy1 = abs(p1x - cx) + hx, abs(p1y - cy) + hy
+    f1 = _root(ux1, uy1)
+    err1 = slack * (1.0 + f1 + lo)
+    if f1 + guard_m >= lo + err1:
+        return True
+    if f0 + guard_m < lo - err0 and f1 + guard_m < lo - err1:
+        return False
+    far = _max(math.hypot(ux0, uy0), math.hypot(ux1, uy1))
+    return far + guard_m >= lo
+
+
+@numba.njit(cache=True)
+def _far_bound(px, py, ax, ay, ex, ey, hx, hy, guard_m, lo, hi, slack):
+    """The free-space test's bound ``near + hypot(hx, hy) + guard_m`` (``near`` the distance from
+    ``p`` to the segment ``a + t e``, :func:`_nearest_distance`, ``h`` the sensor box's
+    half-widths), or an estimate (:func:`_root` for ``hypot``) on the same side of ``lo`` and of
+    ``hi`` (strictly or not) where it clears both by the slack (module doc, "Distances
+    estimated first")."""
+    qx, qy, near = _nearest_estimate(px, py, ax, ay, ex, ey)
+    diag = _root(hx, hy)
+    bound = near + diag + guard_m
+    err = slack * (1.0 + near + diag)
+    if abs(bound - lo) <= err or abs(bound - hi) <= err:
+        bound = math.hypot(qx - px, qy - py) + math.hypot(hx, hy) + guard_m
+    return bound
 
 
 @numba.njit(cache=True)
@@ -157,11 +273,12 @@ def heading_flags(box, half_aperture_rad, angle_margin_rad, trig_limit_rad):
 
 
 @numba.njit(cache=True, inline="always")
-def sensor_row(
-    box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
-):
-    """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
-    those of :func:`heading_flags`."""
+def turned_row(cos_theta, sin_theta, belt, i, full, half_turn, arc_slack):
+    """The part of row ``i`` of :func:`sensor_rows` that depends on the heading alone: the
+    mount's offset range ``(x_lo, x_hi, y_lo, y_hi)`` (m, the mount turned by every heading of
+    the box), then the unit vectors of the right wedge edge at ``theta_lo``, the left at
+    ``theta_hi``, the right at ``theta_hi`` and the left at ``theta_lo`` (``x, y`` each): a
+    12-tuple for :func:`placed_row`."""
     cos_lo, sin_lo, cos_hi, sin_hi = cos_theta[0], sin_theta[0], cos_theta[1], sin_theta[1]
     cb, sb = belt[i, COS_BETA], belt[i, SIN_BETA]
     ax, ay = cos_lo * cb - sin_lo * sb, sin_lo * cb + cos_lo * sb  # theta_lo + beta
@@ -175,31 +292,56 @@ def sensor_row(
     sin_min = -1.0 if reach_ny else _min(ay, by)
     sin_max = 1.0 if reach_py else _max(ay, by)
     r_lo, r_hi = belt[i, R_LO], belt[i, R_HI]
-    x_lo = box[0, 0] + _min(r_lo * cos_min, r_hi * cos_min) - margin_m
-    x_hi = box[0, 1] + _max(r_lo * cos_max, r_hi * cos_max) + margin_m
-    y_lo = box[1, 0] + _min(r_lo * sin_min, r_hi * sin_min) - margin_m
-    y_hi = box[1, 1] + _max(r_lo * sin_max, r_hi * sin_max) + margin_m
-    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
-    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
-    rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
-    rows[i, DIAG] = math.hypot(hx, hy)
     # right edge alpha - gamma, left edge alpha + gamma, at theta_lo and theta_hi
     cr, sr = belt[i, COS_RIGHT], belt[i, SIN_RIGHT]
     cl, sl = belt[i, COS_LEFT], belt[i, SIN_LEFT]
-    right_lo_x, right_lo_y = cos_lo * cr - sin_lo * sr, sin_lo * cr + cos_lo * sr
-    right_hi_x, right_hi_y = cos_hi * cr - sin_hi * sr, sin_hi * cr + cos_hi * sr
-    left_lo_x, left_lo_y = cos_lo * cl - sin_lo * sl, sin_lo * cl + cos_lo * sl
-    left_hi_x, left_hi_y = cos_hi * cl - sin_hi * sl, sin_hi * cl + cos_hi * sl
+    return (
+        _min(r_lo * cos_min, r_hi * cos_min),
+        _max(r_lo * cos_max, r_hi * cos_max),
+        _min(r_lo * sin_min, r_hi * sin_min),
+        _max(r_lo * sin_max, r_hi * sin_max),
+        cos_lo * cr - sin_lo * sr,
+        sin_lo * cr + cos_lo * sr,
+        cos_hi * cl - sin_hi * sl,
+        sin_hi * cl + cos_hi * sl,
+        cos_hi * cr - sin_hi * sr,
+        sin_hi * cr + cos_hi * sr,
+        cos_lo * cl - sin_lo * sl,
+        sin_lo * cl + cos_lo * sl,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def placed_row(box, turned, i, narrow, margin_m, guard_m, rows):
+    """Row ``i`` of :func:`sensor_rows` for the pose box ``box (3, 2)`` from its heading's part
+    ``turned`` (:func:`turned_row`)."""
+    x_lo = box[0, 0] + turned[0] - margin_m
+    x_hi = box[0, 1] + turned[1] + margin_m
+    y_lo = box[1, 0] + turned[2] - margin_m
+    y_hi = box[1, 1] + turned[3] + margin_m
+    cx, cy = (x_lo + x_hi) / 2.0, (y_lo + y_hi) / 2.0
+    hx, hy = (x_hi - x_lo) / 2.0, (y_hi - y_lo) / 2.0
+    rows[i, CX], rows[i, CY], rows[i, HX], rows[i, HY] = cx, cy, hx, hy
     row = rows[i]
     # union of the wedges over the box (a superset; unused, c = -inf, unless narrow)
-    _wedge_planes(right_lo_x, right_lo_y, 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
-    _wedge_planes(left_hi_x, left_hi_y, -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
+    _wedge_planes(turned[4], turned[5], 1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION)
+    _wedge_planes(turned[6], turned[7], -1.0, cx, cy, hx, hy, -1.0, guard_m, row, UNION + 3)
     if not narrow:
         row[UNION + 2] = -np.inf
         row[UNION + 5] = -np.inf
     # intersection of the wedges (a subset; used only when sure)
-    _wedge_planes(right_hi_x, right_hi_y, 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
-    _wedge_planes(left_lo_x, left_lo_y, -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+    _wedge_planes(turned[8], turned[9], 1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER)
+    _wedge_planes(turned[10], turned[11], -1.0, cx, cy, hx, hy, 1.0, guard_m, row, INTER + 3)
+
+
+@numba.njit(cache=True, inline="always")
+def sensor_row(
+    box, cos_theta, sin_theta, belt, i, full, half_turn, narrow, margin_m, guard_m, arc_slack, rows
+):
+    """Row ``i`` of :func:`sensor_rows` (sensor ``i``'s box and wedge half-planes), the flags
+    those of :func:`heading_flags`."""
+    turned = turned_row(cos_theta, sin_theta, belt, i, full, half_turn, arc_slack)
+    placed_row(box, turned, i, narrow, margin_m, guard_m, rows)
 
 
 @numba.njit(cache=True)
@@ -286,29 +428,43 @@ def _segment_verdicts(
         if need_hit or need_close:
             p0x, p0y = ax + t0 * ex, ay + t0 * ey
             dx, dy = (t1 - t0) * ex, (t1 - t0) * ey
-            dist_lb = _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
-            if need_hit and dist_lb <= hi:
-                dist_ub = (
-                    _max(
-                        _point_box_farthest(p0x, p0y, cx, cy, hx, hy),
-                        _point_box_farthest(p0x + dx, p0y + dy, cx, cy, hx, hy),
-                    )
-                    + guard_m
+            # dist_lb = _segment_box_gap(...) - guard_m, its comparisons decided on the estimate
+            # where it clears them (module doc, "Distances estimated first")
+            dist_lb, err = _gap_estimate(
+                p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m, DECISION_SLACK
+            )
+            dist_lb -= guard_m
+            if (need_hit and abs(dist_lb - hi) <= err) or (need_close and abs(dist_lb - lo) <= err):
+                dist_lb = (
+                    _segment_box_gap(p0x, p0y, dx, dy, cx, cy, hx, hy, near_switch_m) - guard_m
                 )
-                if dist_ub >= lo:
-                    hit[i] = True
+            if (
+                need_hit
+                and dist_lb <= hi
+                and _far_reaches(
+                    p0x, p0y, p0x + dx, p0y + dy, cx, cy, hx, hy, guard_m, lo, DECISION_SLACK
+                )
+            ):
+                hit[i] = True
             if need_close and (dist_lb < lo or (kind[i] == FREE and dist_lb == lo)):
                 close[i] = True  # some pose may see this segment closer than lo
         # free-space test: segment points in the cone for every pose of the box
         if sure:
             u0, u1 = _clip(ax, ay, ex, ey, rows[i], INTER)
             if u0 <= u1:
-                far_bound = (
-                    _nearest_distance(
-                        cx, cy, ax + u0 * ex, ay + u0 * ey, (u1 - u0) * ex, (u1 - u0) * ey
-                    )[2]
-                    + rows[i, DIAG]
-                    + guard_m
+                far_bound = _far_bound(
+                    cx,
+                    cy,
+                    ax + u0 * ex,
+                    ay + u0 * ey,
+                    (u1 - u0) * ex,
+                    (u1 - u0) * ey,
+                    hx,
+                    hy,
+                    guard_m,
+                    lo,
+                    hi,
+                    DECISION_SLACK,
                 )
                 if far_bound < lo:
                     fires[i] = True
@@ -461,10 +617,20 @@ def sensor_verdicts_into(
                     seen[j] = n + 1
                     ax, ay = segments[j, 0, 0], segments[j, 0, 1]
                     ex, ey = segments[j, 1, 0] - ax, segments[j, 1, 1] - ay
-                    gap = _segment_box_gap(
-                        ax, ay, ex, ey, hull_cx, hull_cy, hull_hx, hull_hy, near_switch_m
-                    )
-                    if gap <= visible:
+                    if _gap_within(  # gap - 0.0 is the gap, bit for bit
+                        ax,
+                        ay,
+                        ex,
+                        ey,
+                        hull_cx,
+                        hull_cy,
+                        hull_hx,
+                        hull_hy,
+                        near_switch_m,
+                        0.0,
+                        visible,
+                        DECISION_SLACK,
+                    ):
                         remaining -= _segment_verdicts(
                             ax,
                             ay,

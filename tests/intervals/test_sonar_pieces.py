@@ -15,8 +15,12 @@ import numpy as np
 import pytest
 
 from intervals.boxes import bisect
+from intervals.localize import _test_and_counts
+from intervals.sivia import OUTSIDE, UNDECIDED
 from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.pieces import piece_rejections
+from intervals.sonar.room import room_verdicts
+from intervals.sonar.scan import SonarScan
 from tests.helpers import cone_ranges, random_scan_case
 from tests.intervals.test_contractor import _sample, _with_outliers
 
@@ -107,3 +111,74 @@ def test_a_piece_left_at_enough_rejections_has_the_same_verdict(enough):
         assert np.array_equal(left[counts < enough], full[counts < enough])
         short += int(np.count_nonzero(full_counts > enough))
     assert short > 50  # rows were cut short
+
+
+def _star_boundary(rng, vertices):
+    """A star-shaped polygon ``(vertices, 2)`` around (5, 5) m, radii 2 to 5 m (not convex)."""
+    angle = np.sort(rng.uniform(0, 2 * np.pi, vertices))
+    radius = rng.uniform(2.0, 5.0, vertices)
+    return np.stack([5 + radius * np.cos(angle), 5 + radius * np.sin(angle)], axis=1)
+
+
+def test_the_pieces_of_a_parent_inside_the_room_are_inside_it():
+    """What the tightening's test inherits from a parent: every piece of a parent that the
+    in-room test finds wholly inside a (non-convex) polygon is found wholly inside it too, never
+    outside; and the tightening's test (in-room test skipped for those pieces) gives the
+    verdicts of the in-room test run on every piece."""
+    rng = np.random.default_rng(17)
+    inherited = room_rejected = 0
+    for case in range(8):
+        boundary = _star_boundary(rng, int(rng.integers(5, 40)))
+        half = rng.uniform(0.005, 0.6, (400, 3)) * np.array([1.0, 1.0, 0.5])
+        centre = np.concatenate(
+            [rng.uniform(0, 10, (400, 2)), rng.uniform(-np.pi, np.pi, (400, 1))], axis=1
+        )
+        parents = np.stack([centre - half, centre + half], axis=-1)
+        pieces = parents
+        for _ in range(3):
+            pieces = np.concatenate(bisect(pieces, None))
+        parent_in = room_verdicts(parents, boundary)[1]
+        outside, inside = room_verdicts(pieces, boundary)
+        of_inside = parent_in[np.arange(pieces.shape[0]) % parents.shape[0]]
+        assert inside[of_inside].all() and not outside[of_inside].any()
+        inherited += int(np.count_nonzero(of_inside))
+        # the test of the tightening against the in-room test on every piece
+        scan, _, truth = random_scan_case(rng, GAMMAS_RAD[case % 3], bool(case % 2))
+        scan = SonarScan(scan.segments, scan.belt, scan.readings_m, boundary)
+        near = _parents(truth, rng, 40)
+        near_pieces = near
+        for _ in range(3):
+            near_pieces = np.concatenate(bisect(near_pieces, None))
+        for q in (0, 1):
+            verdicts = _test_and_counts(near_pieces, scan, q, False, parents=near)[0]
+            rows = piece_rejections(near_pieces, near, scan, q + 1)
+            by_sensors = rows.sum(axis=1) > q
+            by_room = room_verdicts(near_pieces, boundary)[0]
+            expected = np.where(by_sensors | by_room, OUTSIDE, UNDECIDED)
+            assert np.array_equal(verdicts, expected)
+            room_rejected += int(np.count_nonzero(by_room & ~by_sensors))
+    assert inherited > 3000 and room_rejected > 500  # both paths seen
+
+
+def test_distances_decided_on_estimates_give_the_exact_rows():
+    """The comparisons decided on ``sqrt`` estimates (``DECISION_SLACK``) give the rows of the
+    exact functions (a slack so large that every comparison falls back to them), bit for bit,
+    complete or left at ``enough``; a slack of the wrong sign (estimates trusted 1 mm past their
+    threshold) changes rows, so the comparison sees the decisions."""
+    rng = np.random.default_rng(61)
+    changed = 0
+    for case in range(9):
+        scan, _, truth = random_scan_case(
+            rng, GAMMAS_RAD[case % 3], echoes_never_lost=bool(case % 2)
+        )
+        scan = _with_outliers(scan, rng, case % 3)
+        parents = _parents(truth, rng, 24)
+        pieces = parents
+        for _ in range(3):
+            pieces = np.concatenate(bisect(pieces, None))
+        for enough in (None, 2):
+            exact = piece_rejections(pieces, parents, scan, enough, slack=1e6)
+            assert np.array_equal(piece_rejections(pieces, parents, scan, enough), exact)
+            wrong = piece_rejections(pieces, parents, scan, enough, slack=-1e-3)
+            changed += int(np.count_nonzero(wrong != exact))
+    assert changed > 0
