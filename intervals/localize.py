@@ -34,7 +34,7 @@ from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
-from intervals.tighten import MAX_LEVELS, tighten
+from intervals.tighten import HEADING_CUT_WEIGHT, MAX_LEVELS, tighten
 
 MIN_LEVEL_BOXES = 128
 """SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
@@ -369,7 +369,7 @@ def _pave(
                 rejects,
                 counted,
                 (lambda b: contractor.contract(b, local, q, validated=True)) if contract else None,
-                scale,
+                scale * pose_scale(HEADING_CUT_WEIGHT),
                 tighten_levels,
                 max_boxes=max_boxes,
                 max_tested=left,
