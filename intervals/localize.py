@@ -257,7 +257,9 @@ def _pave(
     below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
     as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
     count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
-    largest boxes refined first, the rest kept as they are), and within ``tighten_max_tested``
+    boxes expected to remove the most volume refined first, the rest kept as they are; the cut
+    axis chosen with the heading weighed :data:`intervals.tighten.HEADING_CUT_WEIGHT` times
+    more than in SIVIA), and within ``tighten_max_tested``
     tests (None: no limit of its own), before any shaving.
     """
     stored, counts, tested = [], [], [0]

@@ -44,27 +44,29 @@ sensor and leaving it once ``q + 1`` sensors reject it made a piece 1.5 to 2 tim
 again (0.8 us on ``hall``, 1.2 on ``corridor``; BENCHMARKS.md, "The piece test sensor by
 sensor").
 
-Under the caps a call refines only the boxes for which there is room: the set after it holds
-at most ``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as
-they are, and when there is room for none the pass stops (sound either way, only coarser:
-refining never has to finish). The boxes refined are those whose refinement is expected to
-remove the most volume: a box's volume times the share of its parent's volume that the
-parent's refinement removed (its children dropped by the test or the contractor, or
-contracted; 1 for the boxes handed in, so the first call ranks them by volume), not the
-largest boxes: a box inside the consistent sheet, whose cut removed nothing, no longer takes
-the tests of one on its edge. With the default budget (4000 pieces, 12 levels) the tests run
-out in the second to fourth call on ``corridor``, ``office_floor`` and ``symmetric``, which
-then refines a third to two fifths of the boxes (the median; 1 % to all). The choice of the cut axis also weighs the
-heading more (:data:`HEADING_CUT_WEIGHT`, applied by :mod:`intervals.localize`). Together they
-took the median tightness ratio at 12 levels from 4.0 to 3.4 on ``corridor``, 3.4 to 2.9 on
-``office_floor`` and 2.5 to 2.2 on ``symmetric`` for the same pieces (the ordering alone: 4.0,
-3.1, 2.5; the weight alone: 3.5, 2.9, 2.3; BENCHMARKS.md, "Tightening's budget spent by
-expected gain"). The ordering changes only which boxes are refined, never what a refinement
-keeps. When ``max_boxes`` leaves no room to refine every box ``splits`` times,
-a call makes fewer bisections (down to one), so that more of the boxes are refined: on
-``office_floor`` (six to ten components, the building's repeated rooms, sharing the 10,000
-boxes) 9 levels then bring the median ratio from 4.4 to 3.3, 12 levels from 2.9 to 2.5
-(BENCHMARKS.md, "Tightened sets").
+Under the caps a call refines only the boxes for which there is room: the set after it holds at
+most ``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they
+are, and when there is room for none the pass stops (sound either way, only coarser: refining
+never has to finish). The boxes refined are those whose refinement is expected to remove the
+most volume: a box's volume times the share of its parent's volume that the parent's refinement
+removed (its children dropped by the test or the contractor, or contracted; 1 for the boxes
+handed in, so the first call ranks them by volume), not the largest boxes: a box inside the
+consistent sheet, whose cut removed nothing, no longer takes the tests of one on its edge. With
+the default budget (4000 pieces, 12 levels) the tests run out in the second to fourth call on
+``corridor``, ``office_floor`` and ``symmetric``, which then refines a third to two fifths of
+the boxes (the median; 1 % to all). The choice of the cut axis also weighs the heading more
+(:data:`HEADING_CUT_WEIGHT`, applied by :mod:`intervals.localize`). Together they took the
+median tightness ratio at 12 levels from 4.0 to 3.4 on ``corridor``, 3.4 to 2.9 on
+``office_floor`` and 2.5 to 2.2 on ``symmetric`` for the same pieces (another sampling seed:
+4.0 to 3.4, 3.2 to 2.9, 2.4 to 2.4; the ordering alone: 4.0, 3.1, 2.5; the weight alone: 3.5,
+2.9, 2.3), the tracking epochs' CPU within noise but for ``office_floor``'s p95, about 0.5 ms
+more (BENCHMARKS.md, "Tightening's budget spent by expected gain"). The ordering changes only
+which boxes are refined, never what a refinement keeps.
+
+When ``max_boxes`` leaves no room to refine every box ``splits`` times, a call makes fewer
+bisections (down to one), so that more of the boxes are refined: on ``office_floor`` (six to
+ten components, the building's repeated rooms, sharing the 10,000 boxes) 9 levels then bring
+the median ratio from 4.4 to 3.3, 12 levels from 2.9 to 2.5 (BENCHMARKS.md, "Tightened sets").
 """
 
 from __future__ import annotations
