@@ -34,7 +34,7 @@ from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
-from intervals.tighten import MAX_LEVELS, tighten
+from intervals.tighten import HEADING_CUT_WEIGHT, MAX_LEVELS, tighten
 
 MIN_LEVEL_BOXES = 128
 """SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
@@ -257,7 +257,9 @@ def _pave(
     below ``eps`` (:func:`intervals.tighten.tighten`: that many bisections, each child tested
     as SIVIA's stored boxes are, at ``q``, and contracted when ``contract``), each keeping the
     count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
-    largest boxes refined first, the rest kept as they are), and within ``tighten_max_tested``
+    boxes expected to remove the most volume refined first, the rest kept as they are; the cut
+    axis chosen with the heading weighed :data:`intervals.tighten.HEADING_CUT_WEIGHT` times
+    more than in SIVIA), and within ``tighten_max_tested``
     tests (None: no limit of its own), before any shaving.
     """
     stored, counts, tested = [], [], [0]
@@ -369,7 +371,7 @@ def _pave(
                 rejects,
                 counted,
                 (lambda b: contractor.contract(b, local, q, validated=True)) if contract else None,
-                scale,
+                scale * pose_scale(HEADING_CUT_WEIGHT),
                 tighten_levels,
                 max_boxes=max_boxes,
                 max_tested=left,

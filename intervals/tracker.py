@@ -244,13 +244,15 @@ class TrackerSettings:
     volume to 2.1 to 2.6 times (median over the tracking epochs of seven built-in plans;
     ``office_floor`` 73 to 3.1, and 2.0 at 12 levels; ``benchmarks/tightness.py``), for an
     epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few (without
-    the test budget ``tighten_max_tested``; at its default, 12 levels give at most 2.7 on six
-    plans, ``symmetric`` 2.5, and 4.0 on ``corridor`` and 3.4 on ``office_floor``, tracking CPU
-    p95 at most 9.4 ms at a load of 3; BENCHMARKS.md, "The tightening pass per piece")."""
+    the test budget ``tighten_max_tested``; at its default, 12 levels give at most 2.1 on five
+    plans, ``symmetric`` 2.2 to 2.4, and 3.4 on ``corridor`` and 2.9 on ``office_floor``
+    (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 8 to 12 ms at a load of 2;
+    BENCHMARKS.md, "Tightening's budget spent by expected gain")."""
     tighten_max_tested: int = bounded(4_000, minimum=0, maximum=10_000_000, integer=True)
     """With ``tighten_levels``, the most pieces the tightening may test in one epoch (within the
-    budget's tests left): the largest boxes are refined first, the others kept as they are
-    (sound, only coarser), so its cost stays bounded on large sets (:mod:`intervals.tighten`).
+    budget's tests left): the boxes whose refinement is expected to remove the most volume are
+    refined first, the others kept as they are (sound, only coarser), so its cost stays bounded
+    on large sets (:mod:`intervals.tighten`).
     4000: the most that kept every built-in plan's tracking CPU p95 at or under about 9 ms at
     12 levels once a piece cost 1.0 to 1.4 us (session 28; 2000 before)."""
 

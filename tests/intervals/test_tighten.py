@@ -241,6 +241,61 @@ def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
     assert kept > 200  # the check saw consistent poses
 
 
+def _block_and_sheet(boxes, parents=None):
+    """``(keep, counts)`` for the union of the cube ``[0, 1]^3`` and the sheet
+    ``|z - 0.3 x - 0.2 y| <= 0.02`` over ``2 <= x <= 4``: exact interval bounds of each part."""
+    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
+    cube = np.all((lo <= 1.0) & (hi >= 0.0), axis=1)
+    g_lo = lo[:, 2] - 0.3 * hi[:, 0] - 0.2 * hi[:, 1]
+    g_hi = hi[:, 2] - 0.3 * lo[:, 0] - 0.2 * lo[:, 1]
+    sheet = (g_lo <= 0.02) & (g_hi >= -0.02) & (lo[:, 0] <= 4.0) & (hi[:, 0] >= 2.0)
+    return cube | sheet, np.zeros(boxes.shape[0], dtype=np.int64)
+
+
+def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
+    """The cube's eight cells (inside the set: a cut removes nothing) are larger than the
+    sheet's cells, and after one call their pieces are still the largest boxes. With tests
+    left for 64 boxes in the second call (as many as the cube's pieces), the pass refines
+    sheet pieces, not the cube's: the set ends smaller than after the first call (refining
+    the largest boxes would leave it as large), the cube's 64 pieces come back as they were,
+    every sampled point of the set stays covered, and the same inputs give the same set."""
+    cube = np.array(
+        [
+            [[x, x + 0.5], [y, y + 0.5], [z, z + 0.5]]
+            for x, y, z in itertools.product((0.0, 0.5), repeat=3)
+        ]
+    )
+    edges = [(a, a + 0.25) for a in np.arange(0.0, 2.0, 0.25)]
+    sheet = np.array(
+        [
+            [(2.0 + x0, 2.0 + x1), y, (0.5 + z0, 0.5 + z1)]
+            for (x0, x1), y, (z0, z1) in itertools.product(edges, edges, edges[:5])
+        ]
+    )
+    cells = np.concatenate([cube, sheet[_block_and_sheet(sheet)[0]]])
+    counts = np.zeros(cells.shape[0], dtype=np.int64)
+    budget = 8 * cells.shape[0] + 8 * 64
+    out, _, tested = tighten(cells, counts, _block_and_sheet, None, None, 6, max_tested=budget)
+    first, _, _ = tighten(cells, counts, _block_and_sheet, None, None, 3)
+    assert tested == budget and volume(out) < volume(first) < volume(cells)
+    cube_pieces = out[np.all(out[:, :, 1] <= 1.0, axis=1)]
+    assert cube_pieces.shape[0] == 64
+    assert np.allclose(cube_pieces[:, :, 1] - cube_pieces[:, :, 0], 0.25)
+    rng = np.random.default_rng(5)
+    points = rng.uniform([0.0, 0.0, 0.0], [4.0, 2.0, 1.75], (100000, 3))
+    x, y = points[:20000, 0], points[:20000, 1]
+    points[:20000, 2] = 0.3 * x + 0.2 * y + rng.uniform(-0.02, 0.02, 20000)
+    in_cube = np.all(points <= 1.0, axis=1)
+    on_sheet = np.abs(points[:, 2] - 0.3 * points[:, 0] - 0.2 * points[:, 1]) <= 0.02
+    on_sheet &= points[:, 0] >= 2.0
+    assert np.count_nonzero(in_cube) > 5000 and np.count_nonzero(on_sheet) > 5000
+    points = points[in_cube | on_sheet]
+    assert contains_points(cells, points).any(axis=0).all()
+    assert contains_points(out, points).any(axis=0).all()
+    again, _, _ = tighten(cells, counts, _block_and_sheet, None, None, 6, max_tested=budget)
+    assert np.array_equal(again, out)
+
+
 def test_bad_levels_are_refused():
     rng = np.random.default_rng(0)
     scan, _, truth = random_scan_case(rng, 0.2, False)
