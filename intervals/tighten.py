@@ -42,7 +42,10 @@ epoch on ``hall``, 6.8 to 4.6 on ``office`` and 5.6 to 3.4 on ``apartment`` (9 l
 same pieces kept; BENCHMARKS.md, "Tightening at default cost"); testing a piece sensor by
 sensor and leaving it once ``q + 1`` sensors reject it made a piece 1.5 to 2 times cheaper
 again (0.8 us on ``hall``, 1.2 on ``corridor``; BENCHMARKS.md, "The piece test sensor by
-sensor").
+sensor"). A call's cuts and the clamp of its contracted pieces are one compiled call each
+(:func:`_pieces`, :func:`_clamped`: the same pieces, bit for bit), 4 to 7 % off a piece's
+cost at 12 levels (``office_floor`` 1.16 to 1.08 us; BENCHMARKS.md, "The tracking epoch at
+12 levels, phase by phase").
 
 Under the caps a call refines only the boxes for which there is room: the set after it holds at
 most ``max_boxes`` boxes and the tests stay within ``max_tested``; the others are kept as they
@@ -76,7 +79,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from intervals.boxes import bisect
+from intervals.boxes import _bisect_into
 from intervals.errors import IntervalError
 
 CountedTest = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -177,10 +180,7 @@ def tighten(
                 frozen = np.concatenate([stuck[~stuck], stuck[stuck], frozen[rest]])
                 share = np.concatenate([share[chosen][~stuck], share[chosen][stuck], share[rest]])
                 continue
-        children = parents
-        for _ in range(cuts):  # each cut: [lower halves, upper halves], child n of parent n % P
-            axes = None if still is None else np.resize(still, children.shape[:2])  # n % P's
-            children = np.concatenate(bisect(children, scale, axes))
+        children = _pieces(parents, scale, still, cuts)
         done += cuts
         tested += children.shape[0]
         keep, child_counts = test(children, parents)
@@ -188,20 +188,81 @@ def tighten(
         tested_index = np.flatnonzero(keep)  # each kept child's place among those tested
         children, child_counts = children[keep], np.asarray(child_counts)[keep]
         if contract is not None and children.shape[0]:
-            c = np.asarray(contract(children), dtype=np.float64)
-            c = np.stack(
-                [np.maximum(c[..., 0], children[..., 0]), np.minimum(c[..., 1], children[..., 1])],
-                axis=-1,
-            )
-            full = np.all(c[..., 0] <= c[..., 1], axis=1)  # NaN compares false: emptied
-            children, child_counts = c[full], child_counts[full]
-            tested_index = tested_index[full]
+            c = np.ascontiguousarray(contract(children), dtype=np.float64)
+            children, full = _clamped(c, np.ascontiguousarray(children))
+            child_counts, tested_index = child_counts[full], tested_index[full]
         boxes = np.concatenate([children, boxes[rest]])
         counts = np.concatenate([child_counts, counts[rest]])
         frozen = np.concatenate([np.zeros(children.shape[0], dtype=bool), frozen[rest]])
         shares = _removed_shares(np.ascontiguousarray(parents), children, tested_index)
         share = np.concatenate([shares, share[rest]])
     return boxes, counts, tested
+
+
+def _pieces(
+    parents: np.ndarray, scale: np.ndarray | None, still: np.ndarray | None, cuts: int
+) -> np.ndarray:
+    """``(P << cuts, d, 2)``: ``parents (P, d, 2)`` bisected ``cuts`` times
+    (:func:`intervals.boxes.bisect` with ``scale (d,)``, never across the axes ``still (P, d)``
+    of a piece's parent; None: unscaled, no idle axis), each cut giving ``[lower halves, upper
+    halves]`` of the pieces before it, so that piece ``n`` is a part of ``parents[n % P]``.
+    One compiled call (:func:`_cut_rounds`): the boxes of ``cuts`` calls of
+    :func:`intervals.boxes.bisect` and their concatenations, bit for bit."""
+    parents = np.ascontiguousarray(parents, dtype=np.float64)
+    d = parents.shape[1]
+    return _cut_rounds(
+        parents,
+        np.ones(d) if scale is None else np.asarray(scale, dtype=np.float64),
+        scale is not None,
+        np.zeros((0, d), dtype=bool) if still is None else np.ascontiguousarray(still, dtype=bool),
+        still is not None,
+        int(cuts),
+    )
+
+
+@numba.njit(cache=True)
+def _cut_rounds(parents, scale, scaled, still, has_idle, cuts):
+    """:func:`_pieces`: ``cuts`` rounds of :func:`intervals.boxes._bisect_into` (its
+    arguments ``scale, scaled``; the idle axes of piece ``n`` those of ``still[n % P]`` when
+    ``has_idle``), the lower halves of a round before its upper halves."""
+    p_count, d = parents.shape[0], parents.shape[1]
+    pieces = parents.copy()
+    for _ in range(cuts):
+        m = pieces.shape[0]
+        idle = np.zeros((m if has_idle else 0, d), dtype=np.bool_)
+        if has_idle:
+            for n in range(m):
+                for a in range(d):
+                    idle[n, a] = still[n % p_count, a]
+        halves = np.empty((2 * m, d, 2))
+        _bisect_into(pieces, scale, scaled, idle, has_idle, halves[:m], halves[m:])
+        pieces = halves
+    return pieces
+
+
+@numba.njit(cache=True)
+def _clamped(contracted, boxes):
+    """``(kept (K, d, 2), full (N,) bool)``: the rows of ``contracted (N, d, 2)`` clamped into
+    those of ``boxes (N, d, 2)`` (the values of ``np.maximum`` of the lower bounds and
+    ``np.minimum`` of the upper, a NaN kept), ``full``: the rows then not empty on any axis (a
+    NaN compares false: emptied), ``kept``: those rows in order."""
+    n, d = boxes.shape[0], boxes.shape[1]
+    out = np.empty_like(boxes)
+    full = np.zeros(n, dtype=np.bool_)
+    count = 0
+    for i in range(n):
+        live = True
+        for a in range(d):
+            lo, hi = contracted[i, a, 0], contracted[i, a, 1]
+            if not (lo >= boxes[i, a, 0] or lo != lo):  # np.maximum: the first when not less
+                lo = boxes[i, a, 0]
+            if not (hi <= boxes[i, a, 1] or hi != hi):  # np.minimum
+                hi = boxes[i, a, 1]
+            out[count, a, 0], out[count, a, 1] = lo, hi
+            live = live and lo <= hi
+        full[i] = live
+        count += live
+    return out[:count].copy(), full
 
 
 def _volumes(boxes: np.ndarray) -> np.ndarray:

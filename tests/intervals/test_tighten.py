@@ -18,7 +18,7 @@ import pytest
 from intervals.boxes import bisect, contains_points, volume
 from intervals.errors import IntervalError
 from intervals.localize import gomne, localize
-from intervals.tighten import MAX_LEVELS, tighten
+from intervals.tighten import MAX_LEVELS, _clamped, _pieces, tighten
 from intervals.tracker import IntervalTracker, TrackerSettings
 from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges, random_scan_case
 from tests.intervals.test_contractor import _with_outliers, _wrong_readings
@@ -294,6 +294,51 @@ def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
     assert contains_points(out, points).any(axis=0).all()
     again, _, _ = tighten(cells, counts, _block_and_sheet, None, None, 6, max_tested=budget)
     assert np.array_equal(again, out)
+
+
+@pytest.mark.parametrize("scaled, with_idle", list(itertools.product((False, True), repeat=2)))
+def test_the_compiled_cuts_and_clamp_give_the_numpy_pieces_bit_for_bit(scaled, with_idle):
+    """:func:`_pieces` against ``cuts`` calls of :func:`bisect` (idle axes of piece ``n``
+    those of parent ``n % P``): the same boxes in the same order, every sampled point of a
+    parent in one of its pieces (they cover it: nothing is lost); :func:`_clamped` against
+    the numpy clamp of the pass, a NaN (emptied) row and an empty clamp left out."""
+    rng = np.random.default_rng(7)
+    lo = rng.uniform(-3, 3, (40, 3, 1))
+    parents = np.concatenate([lo, lo + rng.uniform(0.01, 2, (40, 3, 1))], axis=-1)
+    parents[5, 1] = [0.0, 0.0]  # a zero width
+    scale = np.array([1.0, 0.7, 1.5]) if scaled else None
+    still = rng.random((40, 3)) < 0.3 if with_idle else None
+    if still is not None:
+        still[3] = True  # idle along every axis: cut along its widest axis, as bisect does
+    for cuts in (1, 2, 3):
+        expected = parents
+        for _ in range(cuts):
+            axes = None if still is None else np.resize(still, expected.shape[:2])
+            expected = np.concatenate(bisect(expected, scale, axes))
+        got = _pieces(parents, scale, still, cuts)
+        assert got.tobytes() == expected.tobytes()
+        points = (
+            parents[:, None, :, 0]
+            + rng.random((40, 50, 3)) * np.diff(parents, axis=-1)[..., 0][:, None]
+        )
+        for n in range(40):
+            mine = got[n::40]
+            assert np.all(contains_points(mine, points[n]).any(axis=0))
+    pieces = _pieces(parents, scale, still, 3)
+    contracted = pieces + rng.uniform(-0.05, 0.05, pieces.shape)
+    contracted[10] = np.nan
+    contracted[11, 0] = [pieces[11, 0, 1] + 1, pieces[11, 0, 1] + 2]  # beyond the piece: empty
+    c = np.stack(
+        [
+            np.maximum(contracted[..., 0], pieces[..., 0]),
+            np.minimum(contracted[..., 1], pieces[..., 1]),
+        ],
+        axis=-1,
+    )
+    full = np.all(c[..., 0] <= c[..., 1], axis=1)
+    kept, got_full = _clamped(contracted, pieces)
+    assert np.array_equal(got_full, full) and not full[10] and not full[11]
+    assert kept.tobytes() == c[full].tobytes()
 
 
 def test_bad_levels_are_refused():
