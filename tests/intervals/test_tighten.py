@@ -232,10 +232,10 @@ def _corridor(rng):
 @pytest.mark.slow
 def test_tightened_corridor_strips_keep_every_consistent_pose():
     """GOMNE on strips along random corridors with door niches (the prior 3 m long along the
-    axis, as a tracking prediction there), whole boxes, the plan's heading scale (2 m/rad), q
-    in 0..1, 12 levels within the default 4000 tests: every sampled pose of the untightened set explaining all but q
-    readings lies in the tightened set, which is smaller. Fails if a piece holding a
-    consistent pose is dropped."""
+    axis, as a tracking prediction there), whole boxes, heading scales of 1 and 2 m/rad, q in
+    0..1, 12 levels within the default 4000 tests: every sampled pose of the untightened set
+    explaining all but q readings lies in the tightened set, which is smaller. Fails if a piece
+    holding a consistent pose is dropped."""
     rng = np.random.default_rng(29)
     params, kept = DEFAULT_BELT, 0
     for case in range(4):
@@ -255,7 +255,7 @@ def test_tightened_corridor_strips_keep_every_consistent_pose():
         )
         q = case % 2
         initial = np.stack([truth - [1.5, 0.1, 0.1], truth + [1.5, 0.1, 0.1]], axis=1)
-        scaled = {"heading_scale_m_per_rad": 2.0, "whole_boxes": True}  # as the corridor plan
+        scaled = {"heading_scale_m_per_rad": 1.0 + case // 2, "whole_boxes": True}
         plain = gomne(scan, initial, 0.05, q, **scaled)
         tight = gomne(scan, initial, 0.05, q, **scaled, tighten_levels=12, tighten_max_tested=4000)
         assert plain.consistent and tight.consistent and tight.q == plain.q
