@@ -249,8 +249,11 @@ class TrackerSettings:
     (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 8 to 12 ms at a load of 2;
     BENCHMARKS.md, "Tightening's budget spent by expected gain")."""
     tighten_max_tested: int = bounded(4_000, minimum=0, maximum=10_000_000, integer=True)
-    """With ``tighten_levels``, the most pieces the tightening may test in one epoch (within the
-    budget's tests left): the boxes whose refinement is expected to remove the most volume are
+    """With ``tighten_levels``, the epoch's budget of SIVIA and the tightening in pieces: the
+    tightening may test that many pieces minus
+    :data:`intervals.localize.SIVIA_TEST_PIECES` per box SIVIA tested in the epoch, floored at
+    0 (within the budget's tests left), so a multi-room epoch whose SIVIA tested many boxes gets
+    a coarser tightening; the boxes whose refinement is expected to remove the most volume are
     refined first, the others kept as they are (sound, only coarser), so its cost stays bounded
     on large sets (:mod:`intervals.tighten`).
     4000: the most that kept every built-in plan's tracking CPU p95 at or under about 9 ms at
