@@ -52,6 +52,19 @@ they are undecided, so cutting twice a level instead of three times tests fewer 
 (office_floor's global search: 2.1 s instead of 3.7 s on an idle machine, the same set; small
 tracking sets are faster at 3, with fewer test calls)."""
 
+SIVIA_TEST_PIECES = 1
+"""With ``tighten_max_tested``, the pieces of the tightening one SIVIA box test stands for: the
+pass tests at most ``tighten_max_tested`` minus this many times SIVIA's box tests of the same
+call, floored at 0 (:func:`_pave`), so the call's box tests, SIVIA's and the pass's, stay
+within ``tighten_max_tested``. By cost a SIVIA box test is about 8 pieces (BENCHMARKS.md, "The
+tracking epoch at 12 levels, phase by phase", ``office_floor``: the multi-room epochs test 440
+to 850 boxes for 4.2 to 6.8 ms of box test, contractor and loop, 7.9 to 9.5 us a tested box;
+4000 pieces cost 4.45 ms, 1.1 us a piece), but 8 left the pass no pieces in those epochs and
+few in the others: at 12 levels the median tightness ratio went from 2.9 to 3.4 on
+``office_floor``, 3.4 to 5.3 on ``corridor``, 2.2 to 3.3 on ``symmetric`` (2: 3.2, 3.5, 2.3).
+1 keeps them (3.0, 3.3, 2.3) and takes ``office_floor``'s tracking CPU p95 from about 10.8 to
+9.6 ms (BENCHMARKS.md, "One epoch budget for SIVIA and the pass")."""
+
 RAY_TEST_AUTO_MAX_HALF_APERTURE_RAD = 0.1
 """With ``ray_test=None`` (auto), :mod:`intervals.sonar.rays` joins the box test when the belt's
 half-aperture is at most this. Measured (``benchmarks/intervals_vs_codac.py``, tracking epochs
@@ -259,8 +272,10 @@ def _pave(
     count of its own test; with a budget, within ``max_boxes`` boxes and the tests left (the
     boxes expected to remove the most volume refined first, the rest kept as they are; the cut
     axis chosen with the heading weighed :data:`intervals.tighten.HEADING_CUT_WEIGHT` times
-    more than in SIVIA), and within ``tighten_max_tested``
-    tests (None: no limit of its own), before any shaving.
+    more than in SIVIA), and within ``tighten_max_tested`` minus
+    :data:`SIVIA_TEST_PIECES` times SIVIA's box tests of this call, floored at 0 (None: no
+    limit of its own; a SIVIA that tested many boxes leaves a coarser, still sound,
+    tightening), before any shaving.
     """
     stored, counts, tested = [], [], [0]
     walls = idle.scan_walls(local) if whole else None
@@ -364,8 +379,9 @@ def _pave(
             )
         if tighten_levels and paving.boundary.shape[0]:  # within the budget's tests left
             left = None if max_boxes is None else max(int(tests_per_box * max_boxes) - tested[0], 0)
-            if tighten_max_tested is not None:
-                left = tighten_max_tested if left is None else min(left, tighten_max_tested)
+            if tighten_max_tested is not None:  # the call's budget, SIVIA's tests taken off
+                share = max(tighten_max_tested - SIVIA_TEST_PIECES * tested[0], 0)
+                left = share if left is None else min(left, share)
             boundary, rejects, seen = tighten(
                 paving.boundary,
                 rejects,
@@ -476,8 +492,10 @@ def localize(
     dearer, see :data:`intervals.sonar.contractor.SHAVE_ROUNDS`). ``tighten_levels``: bisections
     below ``eps`` of the boxes kept, each piece tested and contracted
     (:mod:`intervals.tighten`; 0: none; 9 halves each axis about three times), before shaving.
-    ``tighten_max_tested``: the most pieces the tightening may test (None: no limit but the
-    budget's; under it the largest boxes are refined first, the others kept as they are).
+    ``tighten_max_tested``: the budget of the paving and the tightening in pieces: the
+    tightening may test that many pieces minus :data:`SIVIA_TEST_PIECES` per box SIVIA tested,
+    floored at 0 (None: no limit but the budget's; under it the boxes expected to remove the
+    most volume are refined first, the others kept as they are).
     """
     _checked_q(q)
     _checked_budget(max_boxes)

@@ -245,12 +245,17 @@ class TrackerSettings:
     ``office_floor`` 73 to 3.1, and 2.0 at 12 levels; ``benchmarks/tightness.py``), for an
     epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few (without
     the test budget ``tighten_max_tested``; at its default, 12 levels give at most 2.1 on five
-    plans, ``symmetric`` 2.2 to 2.4, and 3.4 on ``corridor`` and 2.9 on ``office_floor``
-    (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 8 to 12 ms at a load of 2;
-    BENCHMARKS.md, "Tightening's budget spent by expected gain")."""
+    plans, ``symmetric`` 2.2 to 2.4, and 3.3 to 3.4 on ``corridor`` and 2.9 to 3.0 on
+    ``office_floor`` (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 at most 9.9 ms
+    at a load of 2 with the budget shared with SIVIA (8 to 12 ms before); BENCHMARKS.md,
+    "Tightening's budget spent by expected gain", "One epoch budget for SIVIA and the
+    pass")."""
     tighten_max_tested: int = bounded(4_000, minimum=0, maximum=10_000_000, integer=True)
-    """With ``tighten_levels``, the most pieces the tightening may test in one epoch (within the
-    budget's tests left): the boxes whose refinement is expected to remove the most volume are
+    """With ``tighten_levels``, the epoch's budget of SIVIA and the tightening in pieces: the
+    tightening may test that many pieces minus
+    :data:`intervals.localize.SIVIA_TEST_PIECES` per box SIVIA tested in the epoch, floored at
+    0 (within the budget's tests left), so a multi-room epoch whose SIVIA tested many boxes gets
+    a coarser tightening; the boxes whose refinement is expected to remove the most volume are
     refined first, the others kept as they are (sound, only coarser), so its cost stays bounded
     on large sets (:mod:`intervals.tighten`).
     4000: the most that kept every built-in plan's tracking CPU p95 at or under about 9 ms at

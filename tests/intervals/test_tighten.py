@@ -300,6 +300,57 @@ def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
     assert kept > 200  # the check saw consistent poses
 
 
+def test_sivia_s_tests_are_taken_off_the_pass_s_pieces(monkeypatch):
+    """``tighten_max_tested`` is shared with SIVIA: the pass may test that many pieces minus
+    :data:`intervals.localize.SIVIA_TEST_PIECES` per box SIVIA tested, floored at 0, and
+    tests no more; with a budget SIVIA's tests exhaust the pass tests nothing and the set is
+    the plain paving's. Every sampled pose that explains all but ``q`` readings stays."""
+    import intervals.localize as loc
+
+    calls = []  # per localize: [SIVIA's tests, the pass's max_tested, the pieces it tested]
+    test_and_counts, tighten_pass = loc._test_and_counts, loc.tighten
+
+    def counting(b, *args, **kwargs):
+        if "parents" not in kwargs:  # SIVIA's test (the pass's pieces come with parents)
+            calls[-1][0] += b.shape[0]
+        return test_and_counts(b, *args, **kwargs)
+
+    def passing(*args, **kwargs):
+        boxes, counts, seen = tighten_pass(*args, **kwargs)
+        calls[-1][1:] = [kwargs["max_tested"], seen]
+        return boxes, counts, seen
+
+    monkeypatch.setattr(loc, "_test_and_counts", counting)
+    monkeypatch.setattr(loc, "tighten", passing)
+    rng = np.random.default_rng(29)
+    kept = 0
+    for case in range(3):
+        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
+        q = case % 2
+        scan = _with_outliers(scan, rng, q)
+        prior = np.stack([truth - [0.5, 0.5, 0.25], truth + [0.5, 0.5, 0.25]], axis=-1)
+        calls.append([0, None, None])
+        plain = localize(scan, prior, 0.05, q=q)
+        sivia_tests = calls[-1][0]
+        assert sivia_tests > 100 and not plain.is_empty
+        share = sivia_tests * loc.SIVIA_TEST_PIECES
+        for budget in (share + 3000, share // 2):
+            calls.append([0, None, None])
+            tight = localize(scan, prior, 0.05, q=q, tighten_levels=12, tighten_max_tested=budget)
+            tests, max_tested, seen = calls[-1]
+            assert tests == sivia_tests
+            assert max_tested == max(budget - share, 0) and 0 <= seen <= max_tested < budget
+            if max_tested == 0:
+                assert np.array_equal(tight.outer, plain.outer)
+            else:
+                assert seen > 0 and tight.volume() < plain.volume()
+            poses = _poses_in(plain.outer, truth, rng, 2000)
+            fits = _wrong_readings(poses, scan, params) <= q
+            assert not np.any(fits & ~contains_points(tight.outer, poses).any(axis=0))
+            kept += int(np.count_nonzero(fits))
+    assert kept > 200  # the check saw consistent poses
+
+
 def _block_and_sheet(boxes, parents=None):
     """``(keep, counts)`` for the union of the cube ``[0, 1]^3`` and the sheet
     ``|z - 0.3 x - 0.2 y| <= 0.02`` over ``2 <= x <= 4``: exact interval bounds of each part."""
