@@ -39,6 +39,16 @@ def _poses_in(boxes, truth, rng, count):
     return np.concatenate([uniform, near])
 
 
+def _outlier_case(rng, case, half_widths):
+    """``(scan, params, truth, q, prior (3, 2))``: a random room scan at 12.5 degrees' half
+    aperture (echoes never lost when ``case`` is odd), ``q = case % 2`` readings replaced by
+    outliers, the prior ``truth -+ half_widths (3,)`` (m, m, rad)."""
+    scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
+    q = case % 2
+    scan = _with_outliers(scan, rng, q)
+    return scan, params, truth, q, np.stack([truth - half_widths, truth + half_widths], axis=-1)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
@@ -76,9 +86,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
     minimal set (read off the pieces' counts) every pose with at most q wrong readings."""
     rng = np.random.default_rng(29)
     for case in range(6):
-        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
-        scan = _with_outliers(scan, rng, case % 2)
-        prior = np.stack([truth - [0.3, 0.3, 0.15], truth + [0.3, 0.3, 0.15]], axis=-1)
+        scan, params, truth, _, prior = _outlier_case(rng, case, [0.3, 0.3, 0.15])
         plain = gomne(scan, prior, 0.05, q_max=2, guaranteed=True)
         wide = gomne(scan, prior, 0.05, q_max=2, guaranteed=True, tighten_levels=6)
         small = gomne(scan, prior, 0.05, q_max=2, guaranteed=False, tighten_levels=6)
@@ -280,10 +288,7 @@ def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
     rng = np.random.default_rng(41)
     kept = 0
     for case in range(4):
-        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
-        q = case % 2
-        scan = _with_outliers(scan, rng, q)
-        prior = np.stack([truth - [0.3, 0.3, 0.15], truth + [0.3, 0.3, 0.15]], axis=-1)
+        scan, params, truth, q, prior = _outlier_case(rng, case, [0.3, 0.3, 0.15])
         plain = localize(scan, prior, 0.05, q=q)
         assert not plain.is_empty
         full = localize(scan, prior, 0.05, q=q, tighten_levels=9)
@@ -325,10 +330,7 @@ def test_sivia_s_tests_are_taken_off_the_pass_s_pieces(monkeypatch):
     rng = np.random.default_rng(29)
     kept = 0
     for case in range(3):
-        scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
-        q = case % 2
-        scan = _with_outliers(scan, rng, q)
-        prior = np.stack([truth - [0.5, 0.5, 0.25], truth + [0.5, 0.5, 0.25]], axis=-1)
+        scan, params, truth, q, prior = _outlier_case(rng, case, [0.5, 0.5, 0.25])
         calls.append([0, None, None])
         plain = localize(scan, prior, 0.05, q=q)
         sivia_tests = calls[-1][0]
