@@ -246,10 +246,11 @@ class TrackerSettings:
     epoch 2.3 to 6 times as dear and a set of tens to hundreds of boxes instead of a few (without
     the test budget ``tighten_max_tested``; at its default, 12 levels give at most 2.1 on five
     plans, ``symmetric`` 2.2 to 2.4, and 3.3 to 3.4 on ``corridor`` and 2.9 to 3.0 on
-    ``office_floor`` (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 at most 9.9 ms
-    at a load of 2 with the budget shared with SIVIA (8 to 12 ms before); BENCHMARKS.md,
-    "Tightening's budget spent by expected gain", "One epoch budget for SIVIA and the
-    pass")."""
+    ``office_floor`` (4.0 and 3.2 to 3.4 before session 29), tracking CPU p95 6.5 to 9.6 ms
+    on six plans with the budget shared with SIVIA, 10.1 on ``cluttered_room`` and 10.9 on
+    ``apartment_lived_in`` (quiet machine; BENCHMARKS.md, "Tightening's budget spent by
+    expected gain", "One epoch budget for SIVIA and the pass", "Session 29's main at 12
+    levels")."""
     tighten_max_tested: int = bounded(4_000, minimum=0, maximum=10_000_000, integer=True)
     """With ``tighten_levels``, the epoch's budget of SIVIA and the tightening in pieces: the
     tightening may test that many pieces minus
