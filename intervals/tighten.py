@@ -79,7 +79,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from intervals.boxes import _bisect_into
+from intervals.boxes import _bisect_into, widths
 from intervals.errors import IntervalError
 
 CountedTest = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -164,7 +164,7 @@ def tighten(
         if fit == n:
             chosen, rest = slice(None), np.zeros(0, dtype=np.int64)
         else:
-            gain = _volumes(boxes) * share  # the volume a refinement is expected to remove
+            gain = np.prod(widths(boxes), axis=1) * share  # volume a refinement may remove
             order = np.argsort(-gain, kind="stable")
             order = np.concatenate([order[~frozen[order]], np.flatnonzero(frozen)])
             chosen, rest = order[:fit], order[fit:]
@@ -263,11 +263,6 @@ def _clamped(contracted, boxes):
         full[i] = live
         count += live
     return out[:count].copy(), full
-
-
-def _volumes(boxes: np.ndarray) -> np.ndarray:
-    """``(N,)`` volumes of ``boxes (N, d, 2)``."""
-    return np.prod(boxes[:, :, 1] - boxes[:, :, 0], axis=1)
 
 
 @numba.njit(cache=True)
