@@ -6,6 +6,8 @@ Benchmarks are run as scripts (``python benchmarks/NAME.py``), so this module is
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import platform
 import subprocess
@@ -147,6 +149,37 @@ def code_label(tree: Path) -> str:
         return done.stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return tree.name
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """``--set KEY=VALUE`` (repeatable): a key of the scenarios' ``[estimation]`` table replaced
+    in every run, the value read as JSON (``--set tighten_levels=12``)."""
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="replace an [estimation] key (value as JSON), e.g. tighten_levels=12",
+    )
+
+
+def parsed_settings(parser: argparse.ArgumentParser, items: list[str]) -> dict:
+    """The ``--set`` items as ``{key: value}``; a malformed item is the parser's error."""
+    changes = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError("expected KEY=VALUE")
+            changes[key] = json.loads(value)
+        except ValueError as error:
+            parser.error(f"--set {item}: {error}")
+    return changes
+
+
+def settings_arguments(changes: dict) -> list[str]:
+    """``changes`` as ``--set`` arguments again (for a child process)."""
+    return [f"--set={key}={json.dumps(value)}" for key, value in changes.items()]
 
 
 def record_calls(module: ModuleType, name: str) -> list[tuple]:

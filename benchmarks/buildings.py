@@ -1,7 +1,7 @@
 """Benchmark of the default pipeline on every built-in floor plan, one subprocess per plan.
 
     python benchmarks/buildings.py [PLAN ...] [--duration S] [--timeout S] [--memory-gib G]
-                                   [--compare DIR] [--write]
+                                   [--compare DIR] [--set KEY=VALUE ...] [--write]
 
 Runs what ``robotsim run`` runs (simulation, dead reckoning, interval epochs, fusion,
 summary, rerun recording to a temporary file) on each built-in scenario (default: all of
@@ -26,8 +26,10 @@ most 10 ms, global localisation at most 1 s on ``office_floor``, peak memory at 
 
 ``--compare DIR`` runs each plan a second time with another source tree's code (a
 checkout of another commit; the scenario files are always this checkout's), for figures
-side by side; the ``code`` column names each row's commit. ``--write`` puts the table in
-the ``Buildings`` section of ``BENCHMARKS.md``.
+side by side; the ``code`` column names each row's commit. ``--set KEY=VALUE`` (repeatable)
+replaces a key of every scenario's ``[estimation]`` table (the value read as JSON:
+``--set tighten_levels=12``), in both trees. ``--write`` puts the default pipeline's table
+(no ``--set``) in the ``Buildings`` section of ``BENCHMARKS.md``.
 """
 
 from __future__ import annotations
@@ -47,7 +49,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from _common import code_label, machine_line, markdown_table, write_section
+from _common import (
+    add_set_argument,
+    code_label,
+    machine_line,
+    markdown_table,
+    parsed_settings,
+    settings_arguments,
+    write_section,
+)
 
 #: Variants benchmarked besides the built-in scenarios: name -> (scenario, TOML appended).
 VARIANTS = {
@@ -90,8 +100,9 @@ class ProgressFile:
             self._path.write_text(str(percent), encoding="ascii")
 
 
-def child(name: str, duration_s: float, out: Path) -> int:
-    """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``."""
+def child(name: str, duration_s: float, out: Path, changes: dict | None = None) -> int:
+    """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``.
+    ``changes``: keys of ``[estimation]`` replaced in the plan's scenario (``--set``)."""
     from scenarios.epochs import GLOBAL, TRACKING
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
@@ -102,12 +113,14 @@ def child(name: str, duration_s: float, out: Path) -> int:
     path = SCENARIO_FOLDER / f"{base}.toml"
     text = path.read_text(encoding="utf-8") + "\n" + extra
     spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
-    spec = spec.with_run(duration_s=duration_s)
+    spec = spec.with_run(duration_s=duration_s).with_estimation(**(changes or {}))
     try:
         # warm-up, not timed: loads the compiled kernels (numba's cache) and the lazy imports,
         # which would otherwise land in the first epoch, the global localisation, and in the
         # first recording (rerun imports pyarrow.compute there: about 0.13 s once a process)
+        # (with the same --set keys, so that their kernels are loaded too)
         warm = load_scenario(str(SCENARIO_FOLDER / "hall.toml")).with_run(duration_s=WARM_UP_S)
+        warm = warm.with_estimation(**(changes or {}))
         warm_result = run_scenario(warm)
         with tempfile.TemporaryDirectory() as folder:
             write_recording(
@@ -161,16 +174,22 @@ def _cap_memory(limit_bytes: int) -> None:
 
 
 def run_child(
-    name: str, duration_s: float, timeout_s: float, memory_gib: float, code: Path
+    name: str,
+    duration_s: float,
+    timeout_s: float,
+    memory_gib: float,
+    code: Path,
+    changes: dict | None = None,
 ) -> Outcome:
     """One plan in a child process importing the code tree ``code`` (its ``PYTHONPATH``),
-    capped at ``memory_gib`` GiB of address space and ``timeout_s`` wall seconds."""
+    capped at ``memory_gib`` GiB of address space and ``timeout_s`` wall seconds, with the
+    ``[estimation]`` keys ``changes`` replaced."""
     limit = int(memory_gib * 2**30)
     environment = {**os.environ, "PYTHONPATH": str(code)}
     with tempfile.TemporaryDirectory() as folder:
         out, err = Path(folder) / "summary.json", Path(folder) / "stderr.txt"
         command = [sys.executable, __file__, "--child", name, "--duration", str(duration_s)]
-        command += ["--out", str(out)]
+        command += ["--out", str(out), *settings_arguments(changes or {})]
         start = time.perf_counter()
         with open(err, "wb") as stderr:
             # preexec_fn runs between fork and exec: it only sets the limit
@@ -305,12 +324,16 @@ def main(argv: list[str] | None = None) -> int:
         metavar="DIR",
         help="another source tree (a checkout) to run each plan with too, side by side",
     )
+    add_set_argument(parser)
     parser.add_argument("--write", action="store_true", help="update BENCHMARKS.md")
     parser.add_argument("--child", metavar="PLAN", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    changes = parsed_settings(parser, args.set)
     if args.child:
-        return child(args.child, args.duration, args.out)
+        return child(args.child, args.duration, args.out, changes)
+    if changes and args.write:
+        parser.error("--write keeps the default pipeline's table: not with --set")
 
     from scenarios.mcl_pipeline import Estimator
     from scenarios.spec import builtin_names, load_scenario
@@ -341,16 +364,23 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for plan in plans:
         for tree in trees:
-            outcome = run_child(plan, args.duration, args.timeout, args.memory_gib, tree)
+            outcome = run_child(plan, args.duration, args.timeout, args.memory_gib, tree, changes)
             rows.append([table_row(outcome)[0], labels[tree], *table_row(outcome)[1:]])
             print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
     load_after = os.getloadavg()
+    settings = (
+        "the scenario's own settings (the default pipeline, as `robotsim run`, recording included)"
+        if not changes
+        else "the scenario's settings with "
+        + ", ".join(f"`{k} = {v!r}`" for k, v in changes.items())
+        + " (as `robotsim run`, recording included)"
+    )
     body = "\n".join(
         [
             f"`python benchmarks/buildings.py --duration {args.duration:g} --timeout "
-            f"{args.timeout:g} --memory-gib {args.memory_gib:g}`: {args.duration:g} s simulated "
-            "per plan with the scenario's own settings (the default pipeline, as `robotsim run`, "
-            "recording included), one child process per plan capped at "
+            f"{args.timeout:g} --memory-gib {args.memory_gib:g}"
+            f"{''.join(' ' + a for a in settings_arguments(changes))}`: {args.duration:g} s "
+            f"simulated per plan with {settings}, one child process per plan capped at "
             f"{args.memory_gib:g} GiB of address space and {args.timeout:g} s of wall time. "
             "Epoch median / p95: all epochs; tracking p95: the tracking epochs alone; global "
             "localisation: the first epoch. Issue 13's targets: >= 100x real time, tracking "

@@ -34,7 +34,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import code_label, machine_line, markdown_table
+from _common import (
+    add_set_argument,
+    code_label,
+    machine_line,
+    markdown_table,
+    parsed_settings,
+    settings_arguments,
+)
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 SCENARIO_FOLDER = REPOSITORY / "scenarios" / "builtin"
@@ -111,8 +118,7 @@ def run_child(
         out = Path(folder) / "figures.json"
         command = [sys.executable, __file__, "--child", plan, "--duration", str(duration_s)]
         command += ["--repeat", str(repeat), "--out", str(out)]
-        for key, value in (changes or {}).items():
-            command += ["--set", f"{key}={json.dumps(value)}"]
+        command += settings_arguments(changes or {})
         done = subprocess.run(
             command,
             env={**os.environ, "PYTHONPATH": str(code)},
@@ -146,22 +152,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each epoch (best kept)")
     parser.add_argument("--compare", type=Path, metavar="DIR", help="another source tree")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="replace an [estimation] key (value as JSON), e.g. tighten_levels=6",
-    )
+    add_set_argument(parser)
     parser.add_argument("--child", metavar="PLAN", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    changes = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep:
-            parser.error(f"--set {item}: expected KEY=VALUE")
-        changes[key] = json.loads(value)
+    changes = parsed_settings(parser, args.set)
     if args.child:
         return child(args.child, args.duration, args.repeat, args.out, changes)
     if not (args.duration > 0 and args.repeat >= 1):
