@@ -70,13 +70,13 @@ def bisect(
     axes not ``idle (N, d)`` when given (among all when every axis of a box is idle).
 
     Returns ``(left, right)``, each ``(N, d, 2)``; they share the cut value, so their union is
-    exactly the parent box. Compiled (:func:`_bisect_into`): the values of the numpy
+    exactly the parent box. Compiled (:func:`bisect_into`): the values of the numpy
     expressions ``widths``, ``np.argmax`` and ``centres``, bit for bit, about five times faster
     on the tightening's few hundred boxes a call.
     """
     boxes = np.ascontiguousarray(boxes, dtype=np.float64)
     left, right = np.empty_like(boxes), np.empty_like(boxes)
-    _bisect_into(
+    bisect_into(
         boxes,
         np.ones(boxes.shape[1]) if scale is None else np.asarray(scale, dtype=np.float64),
         scale is not None,
@@ -89,11 +89,12 @@ def bisect(
 
 
 @numba.njit(cache=True)
-def _bisect_into(boxes, scale, scaled, idle, has_idle, left, right):
-    """:func:`bisect` into ``left, right (N, d, 2)``: per box the widths ``hi - lo`` (times
-    ``scale (d,)`` when ``scaled``), ``-1`` on the axes ``idle (N, d)`` (when ``has_idle``)
-    unless every axis is idle, the first largest (a NaN width first, as ``np.argmax``), cut at
-    ``lo + (hi - lo) / 2``."""
+def bisect_into(boxes, scale, scaled, idle, has_idle, left, right):
+    """:func:`bisect` of ``boxes (N, d, 2)`` written into ``left, right (N, d, 2)``, compiled, for
+    callers that are compiled too (:func:`intervals.tighten.tighten`'s rounds of cuts): per box
+    the widths ``hi - lo`` (times ``scale (d,)`` when ``scaled``), ``-1`` on the axes ``idle
+    (N, d)`` (when ``has_idle``; else ``idle`` is not read) unless every axis is idle, the first
+    largest (a NaN width first, as ``np.argmax``), cut at ``lo + (hi - lo) / 2``."""
     n, d = boxes.shape[0], boxes.shape[1]
     for b in range(n):
         all_idle = has_idle

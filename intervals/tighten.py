@@ -79,7 +79,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from intervals.boxes import _bisect_into, widths
+from intervals.boxes import bisect_into, widths
 from intervals.errors import IntervalError
 
 CountedTest = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -222,7 +222,7 @@ def _pieces(
 
 @numba.njit(cache=True)
 def _cut_rounds(parents, scale, scaled, still, has_idle, cuts):
-    """:func:`_pieces`: ``cuts`` rounds of :func:`intervals.boxes._bisect_into` (its
+    """:func:`_pieces`: ``cuts`` rounds of :func:`intervals.boxes.bisect_into` (its
     arguments ``scale, scaled``; the idle axes of piece ``n`` those of ``still[n % P]`` when
     ``has_idle``), the lower halves of a round before its upper halves."""
     p_count, d = parents.shape[0], parents.shape[1]
@@ -235,7 +235,7 @@ def _cut_rounds(parents, scale, scaled, still, has_idle, cuts):
                 for a in range(d):
                     idle[n, a] = still[n % p_count, a]
         halves = np.empty((2 * m, d, 2))
-        _bisect_into(pieces, scale, scaled, idle, has_idle, halves[:m], halves[m:])
+        bisect_into(pieces, scale, scaled, idle, has_idle, halves[:m], halves[m:])
         pieces = halves
     return pieces
 

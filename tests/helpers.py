@@ -1,6 +1,8 @@
-"""Plain helpers shared by test modules: random sonar cases that the modules' own case
-builders call (a fixture cannot be called from a plain function, so these are functions).
-Fixtures live in ``tests/conftest.py``.
+"""Plain helpers shared by test modules: random sonar cases, the 60 m hall and the brute-force
+counts of the readings a pose does not explain, that the modules' own case builders call (a
+fixture cannot be called from a plain function, so these are functions). Fixtures live in
+``tests/conftest.py``; no test module imports another
+(``tests/test_import_direction.py``).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ import resource
 import signal
 
 import numpy as np
+import shapely
 
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.sensors.sonar import SonarBeltParams, cone_distances
@@ -62,6 +65,82 @@ def boxes_around(truth: np.ndarray, rng: np.random.Generator, count: int) -> np.
     frac[: count // 5] = rng.choice([0.0, 1.0], size=(count // 5, 3))  # truth on a face
     lo = truth - frac * w
     return np.stack([lo, np.maximum(lo + w, truth)], axis=-1)
+
+
+BIG_HALL_BOUNDARY = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, 60.0], [0.0, 60.0]])
+"""The plain 60 m x 60 m hall of ``big_hall``: its boundary polygon ``(4, 2)`` in m."""
+BIG_HALL_SEGMENTS = np.stack([BIG_HALL_BOUNDARY, np.roll(BIG_HALL_BOUNDARY, -1, axis=0)], axis=1)
+"""Its four walls ``(4, 2, 2)`` in m."""
+
+
+def big_hall_truth(rng: np.random.Generator, where: int) -> np.ndarray:
+    """A random pose ``(x_m, y_m, theta_rad)`` in the 60 m hall: ``where`` 0 along the south
+    wall far from the corners, 1 in the south-west corner, 2 in the open, out of every wall's
+    reach."""
+    if where == 0:
+        return np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
+    if where == 1:
+        return np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
+    return np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
+
+
+def big_hall_scan(
+    readings: np.ndarray, echoes_never_lost: bool = False, params: SonarBeltParams = DEFAULT_BELT
+) -> SonarScan:
+    """The scan of ``readings (k,)`` in m by the belt ``params`` in the 60 m hall."""
+    belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
+    return SonarScan(BIG_HALL_SEGMENTS, belt, readings, BIG_HALL_BOUNDARY)
+
+
+def wrong_echoes(poses: np.ndarray, scan: SonarScan, params: SonarBeltParams) -> np.ndarray:
+    """``(...,)``: the echoes of ``scan`` the poses ``(..., 3)`` do not explain by the
+    simulator's cone model within the error bounds (a no-echo reading is not counted)."""
+    d = cone_ranges(poses, scan.segments, params)
+    m = scan.readings_m
+    with np.errstate(invalid="ignore"):  # inf - inf: no echo, not counted
+        gap = np.abs(m - d)
+    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
+    explained = (d <= params.d_max_m) & (gap <= bound)
+    return np.count_nonzero(np.isfinite(m) & ~explained, axis=-1)
+
+
+def wrong_readings(poses: np.ndarray, scan: SonarScan, params: SonarBeltParams) -> np.ndarray:
+    """``(...,)``: the readings the poses ``(..., 3)`` do not explain (:func:`wrong_echoes`), the
+    no-echo readings included where they prove free space (``echoes_never_lost``: a wall in
+    reach), and poses outside ``scan.boundary`` counted as explaining none (``k + 1``)."""
+    wrong = wrong_echoes(poses, scan, params)
+    if scan.belt.echoes_never_lost:
+        d = cone_ranges(poses, scan.segments, params)
+        free = ~np.isfinite(scan.readings_m)
+        wrong = wrong + np.count_nonzero(free & (d <= params.d_max_m), axis=-1)
+    room = shapely.contains_xy(shapely.Polygon(scan.boundary), poses[..., 0], poses[..., 1])
+    return np.where(room, wrong, scan.belt.count + 1)
+
+
+def with_outliers(scan: SonarScan, rng: np.random.Generator, count: int) -> SonarScan:
+    """The scan with ``count`` readings replaced by uniform values in ``[0, d_max]``."""
+    readings = scan.readings_m.copy()
+    which = rng.choice(readings.size, size=count, replace=False)
+    readings[which] = rng.uniform(0.0, scan.belt.d_max_m, count)
+    return SonarScan(scan.segments, scan.belt, readings, scan.boundary)
+
+
+_CORNERS = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+"""The corners of the unit cube ``(8, 3)``, as fractions of a box's widths."""
+
+
+def sample_in_boxes(
+    boxes: np.ndarray, truth: np.ndarray, rng: np.random.Generator, count: int
+) -> np.ndarray:
+    """Poses ``(N, count + 8 + 16, 3)`` in each of ``boxes (N, 3, 2)``: its corners, uniform
+    draws and draws near ``truth (3,)`` (clipped to the box), where the consistent poses are."""
+    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
+    frac = np.concatenate([_CORNERS, rng.uniform(0, 1, (count, 3))])
+    uniform = lo[:, None] + frac[None] * (hi - lo)[:, None]
+    uniform = np.clip(uniform, lo[:, None], hi[:, None])  # lo + (hi - lo) may round past hi
+    near = truth + rng.normal(0, 1, (boxes.shape[0], 16, 3)) * np.array([0.03, 0.03, 0.02])
+    near = np.clip(near, lo[:, None], hi[:, None])
+    return np.concatenate([uniform, near], axis=1)
 
 
 def small_file_limit(max_bytes: int):

@@ -115,3 +115,19 @@ def test_lazy_relative_and_dynamic_imports_are_caught(tmp_path):
     assert imported_modules("from .. import sivia\n", "intervals.inner", True) == [
         (1, "intervals.sivia")
     ]
+
+
+def test_no_test_module_imports_another_test_module():
+    """What test modules share (cases, brute-force counts) lives in ``tests/helpers.py`` or
+    ``tests/conftest.py``: a test module imported by another runs its module code there and
+    ties the two modules' private names together."""
+    root = Path(__file__).resolve().parent.parent
+    modules = sorted((root / "tests").rglob("test_*.py"))
+    assert len(modules) > 20  # found, not an empty check
+    bad = []
+    for path in modules:
+        name = ".".join(path.relative_to(root).with_suffix("").parts)
+        for line, imported in imported_modules(path.read_text(), name, False):
+            if imported.startswith("tests.") and imported.split(".")[-1].startswith("test_"):
+                bad.append(f"{path.relative_to(root)}:{line} imports {imported}")
+    assert bad == []

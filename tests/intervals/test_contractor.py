@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import shapely
 
 from intervals import localize as localize_module
 from intervals.boxes import clip_to_boxes, meets_any_box, volume
@@ -22,53 +21,17 @@ from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
 from intervals.sonar.contractor import HEADING_SLOTS, contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
-from tests.helpers import DEFAULT_BELT, boxes_around, cone_ranges, random_scan_case
+from tests.helpers import (
+    DEFAULT_BELT,
+    boxes_around,
+    random_scan_case,
+    sample_in_boxes,
+    with_outliers,
+    wrong_echoes,
+    wrong_readings,
+)
 
 GAMMAS_RAD = (0.003, 0.05, np.deg2rad(12.5), 0.6)
-CORNERS = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
-
-
-def _wrong_echoes(poses, scan: SonarScan, params) -> np.ndarray:
-    """``(..., )`` number of echoes the poses ``(..., 3)`` do not explain (module doc)."""
-    d = cone_ranges(poses, scan.segments, params)
-    m = scan.readings_m
-    with np.errstate(invalid="ignore"):  # inf - inf: no echo, not counted
-        gap = np.abs(m - d)
-    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
-    explained = (d <= params.d_max_m) & (gap <= bound)
-    return np.count_nonzero(np.isfinite(m) & ~explained, axis=-1)
-
-
-def _wrong_readings(poses, scan: SonarScan, params) -> np.ndarray:
-    """Readings the poses do not explain, no-echo readings included where they prove free
-    space (``echoes_never_lost``), and poses outside the room counted as explaining none."""
-    wrong = _wrong_echoes(poses, scan, params)
-    if scan.belt.echoes_never_lost:
-        d = cone_ranges(poses, scan.segments, params)
-        free = ~np.isfinite(scan.readings_m)
-        wrong = wrong + np.count_nonzero(free & (d <= params.d_max_m), axis=-1)
-    room = shapely.contains_xy(shapely.Polygon(scan.boundary), poses[..., 0], poses[..., 1])
-    return np.where(room, wrong, scan.belt.count + 1)
-
-
-def _with_outliers(scan: SonarScan, rng, count: int) -> SonarScan:
-    """The scan with ``count`` readings replaced by uniform values in ``[0, d_max]``."""
-    readings = scan.readings_m.copy()
-    which = rng.choice(readings.size, size=count, replace=False)
-    readings[which] = rng.uniform(0.0, scan.belt.d_max_m, count)
-    return SonarScan(scan.segments, scan.belt, readings, scan.boundary)
-
-
-def _sample(boxes, truth, rng, count):
-    """Poses ``(N, count + 8 + 16, 3)`` in each box: its corners, uniform draws and draws near
-    the truth (clipped to the box), where the consistent poses are."""
-    lo, hi = boxes[:, :, 0], boxes[:, :, 1]
-    frac = np.concatenate([CORNERS, rng.uniform(0, 1, (count, 3))])
-    uniform = lo[:, None] + frac[None] * (hi - lo)[:, None]
-    uniform = np.clip(uniform, lo[:, None], hi[:, None])  # lo + (hi - lo) may round past hi
-    near = truth + rng.normal(0, 1, (boxes.shape[0], 16, 3)) * np.array([0.03, 0.03, 0.02])
-    near = np.clip(near, lo[:, None], hi[:, None])
-    return np.concatenate([uniform, near], axis=1)
 
 
 def _inside(poses, boxes):
@@ -86,15 +49,15 @@ def test_every_pose_with_at_most_q_wrong_echoes_stays_in_the_contracted_box(gamm
     for case in range(30):
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
         q = case % 3
-        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        scan = with_outliers(scan, rng, int(rng.integers(0, q + 1)))
         boxes = boxes_around(truth, rng, 60)
         out = contract(boxes, scan, q)
         full = ~np.isnan(out).any(axis=(1, 2))
         assert np.all(out[full, :, 0] >= boxes[full, :, 0])
         assert np.all(out[full, :, 1] <= boxes[full, :, 1])
         assert np.array_equal(out[full, 2], boxes[full, 2])  # the heading is left alone
-        poses = _sample(boxes, truth, rng, 40)
-        fits = _wrong_echoes(poses, scan, params) <= q
+        poses = sample_in_boxes(boxes, truth, rng, 40)
+        fits = wrong_echoes(poses, scan, params) <= q
         assert not np.any(fits & ~_inside(poses, out)), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
     assert kept > 1000  # the check saw many consistent poses
@@ -112,8 +75,8 @@ def test_truth_kept_and_boxes_contracted_on_the_default_belt():
         boxes = np.stack([truth + offset - half, truth + offset + half], axis=-1)
         out = contract(boxes, scan, 0)
         assert _inside(truth[None, None].repeat(40, 0), out).all()
-        poses = _sample(boxes, truth, rng, 8)
-        fits = _wrong_echoes(poses, scan, params) == 0
+        poses = sample_in_boxes(boxes, truth, rng, 8)
+        fits = wrong_echoes(poses, scan, params) == 0
         assert not np.any(fits & ~_inside(poses, out))
         area = np.prod(boxes[:, :2, 1] - boxes[:, :2, 0], axis=1)
         ratios.append(np.prod(out[:, :2, 1] - out[:, :2, 0], axis=1) / area)
@@ -225,7 +188,7 @@ def test_shaving_keeps_every_consistent_pose_and_narrows_the_heading(gamma):
     for case in range(16):
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
         q = case % 2
-        scan = _with_outliers(scan, rng, q)
+        scan = with_outliers(scan, rng, q)
         centre = truth + rng.normal(0, 1, (40, 3)) * np.array([0.03, 0.03, 0.02])
         half = rng.uniform(0.01, 0.05, (40, 3))
         boxes = np.stack([centre - half, centre + half], axis=-1)
@@ -235,8 +198,8 @@ def test_shaving_keeps_every_consistent_pose_and_narrows_the_heading(gamma):
         )
         assert np.all(shaved[:, :, 0] >= boxes[rows, :, 0])
         assert np.all(shaved[:, :, 1] <= boxes[rows, :, 1])
-        poses = _sample(boxes, truth, rng, 40)
-        fits = _wrong_readings(poses, scan, params) <= q
+        poses = sample_in_boxes(boxes, truth, rng, 40)
+        fits = wrong_readings(poses, scan, params) <= q
         placed = np.zeros(fits.shape, dtype=bool)
         placed[rows] = _inside(poses[rows], shaved)
         assert not np.any(fits & ~placed), f"case {case}: a consistent pose lost"

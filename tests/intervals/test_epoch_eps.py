@@ -11,8 +11,14 @@ import pytest
 from intervals.boxes import Subpaving, area_xy, contains_points
 from intervals.errors import IntervalError
 from intervals.tracker import IntervalTracker, TrackerSettings
-from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges
-from tests.intervals.test_whole_boxes import HALL, _scan, _wrong
+from tests.helpers import (
+    BIG_HALL_SEGMENTS,
+    DEFAULT_BELT,
+    big_hall_scan,
+    bounded_readings,
+    cone_ranges,
+    wrong_readings,
+)
 
 
 def _tracker(eps_cells: int, eps_m: float = 0.05) -> IntervalTracker:
@@ -79,10 +85,10 @@ def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost, cell
             )
         else:  # in the north-east corner
             truth = np.array([*rng.uniform(57.5, 59.5, 2), rng.uniform(-np.pi, np.pi)])
-        readings = bounded_readings(cone_ranges(truth, _scan_segments(), params), params, rng)
+        readings = bounded_readings(cone_ranges(truth, BIG_HALL_SEGMENTS, params), params, rng)
         if lost:
             readings[rng.random(readings.size) < 0.5] = np.inf
-        scan = _scan(readings, echoes_never_lost=not lost, params=params)
+        scan = big_hall_scan(readings, echoes_never_lost=not lost, params=params)
         centre = np.clip(truth[:2] + rng.uniform(-3.0, 3.0, 2), 4.5, 55.5)
         previous = _set(
             [
@@ -100,7 +106,7 @@ def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost, cell
         poses[: count // 3] = truth + rng.normal(0.0, [0.3, 0.3, 0.05], (count // 3, 3))
         poses[:, 2] = (poses[:, 2] + np.pi) % (2 * np.pi) - np.pi
         poses = poses[contains_points(reach[None], poses)[0] | (np.arange(count) < count // 3)]
-        fits = _wrong(poses, scan, params) <= 1  # q_max = 1
+        fits = wrong_readings(poses, scan, params) <= 1  # q_max = 1
         held = contains_points(coarse.outer, poses).any(axis=0)
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         assert contains_points(coarse.outer, truth[None]).any()
@@ -109,7 +115,3 @@ def test_a_coarser_epoch_from_a_large_set_keeps_every_consistent_pose(lost, cell
         assert area_xy(coarse.outer) <= 1.5 * area_xy(fine.outer) + 1.0
     assert checked > 2000  # the check saw many consistent poses
     assert boxes[0] <= 1.25 * boxes[1], boxes  # about as few boxes
-
-
-def _scan_segments() -> np.ndarray:
-    return np.stack([HALL, np.roll(HALL, -1, axis=0)], axis=1)

@@ -10,8 +10,14 @@ import numpy as np
 from intervals.boxes import Subpaving, contains_points
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, _joined_idle, sivia
 from intervals.tracker import IntervalTracker, TrackerSettings
-from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges
-from tests.intervals.test_whole_boxes import HALL_SEGMENTS, _scan, _wrong
+from tests.helpers import (
+    BIG_HALL_SEGMENTS,
+    DEFAULT_BELT,
+    big_hall_scan,
+    bounded_readings,
+    cone_ranges,
+    wrong_readings,
+)
 
 
 def _expected_runs(present, idle, scores):
@@ -115,8 +121,8 @@ def test_a_tracking_epoch_from_four_wall_strips_keeps_every_consistent_pose():
     for case in range(3):
         along, off = rng.uniform(15.0, 45.0), rng.uniform(1.7, 2.3)
         truth = np.array([along, off, rng.uniform(-0.1, 0.1)])
-        readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
-        scan = _scan(readings, echoes_never_lost=True, params=params)
+        readings = bounded_readings(cone_ranges(truth, BIG_HALL_SEGMENTS, params), params, rng)
+        scan = big_hall_scan(readings, echoes_never_lost=True, params=params)
         half = np.pi / 2
         strips = np.array(  # the truth's place and its images by the hall's quarter turns
             [
@@ -155,7 +161,7 @@ def test_a_tracking_epoch_from_four_wall_strips_keeps_every_consistent_pose():
         poses[near, 1] = 30.0 + s * centred[:, 0] + c * centred[:, 1]
         poses[near, 2] = truth[2] + turns * half + noise[:, 2]
         poses[:, 2] = (poses[:, 2] + np.pi) % (2 * np.pi) - np.pi
-        fits = _wrong(poses, scan, params) <= settings.q_max
+        fits = wrong_readings(poses, scan, params) <= settings.q_max
         held = contains_points(result.outer, poses).any(axis=0)
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         checked += int(np.count_nonzero(fits))

@@ -21,8 +21,7 @@ from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarScan
-from tests.helpers import cone_ranges, random_scan_case
-from tests.intervals.test_contractor import _sample, _with_outliers
+from tests.helpers import cone_ranges, random_scan_case, sample_in_boxes, with_outliers
 
 GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
 
@@ -57,13 +56,13 @@ def test_every_rejection_of_a_piece_is_sound(gamma):
     rejected = explained_seen = same = total = 0
     for case in range(6):
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
-        scan = _with_outliers(scan, rng, case % 3)
+        scan = with_outliers(scan, rng, case % 3)
         parents = _parents(truth, rng, 24)
         pieces = parents
         for _ in range(3):  # the tightening's order: piece n of parent n % P
             pieces = np.concatenate(bisect(pieces, None))
         reject = piece_rejections(pieces, parents, scan)
-        poses = _sample(pieces, truth, rng, 40)
+        poses = sample_in_boxes(pieces, truth, rng, 40)
         explained = _explained(poses, scan, params)
         caught = reject[:, None, :] & explained
         assert not caught.any(), f"case {case}: a sensor rejected a piece with a pose it explains"
@@ -98,7 +97,7 @@ def test_a_piece_left_at_enough_rejections_has_the_same_verdict(enough):
         scan, _, truth = random_scan_case(
             rng, GAMMAS_RAD[case % 3], echoes_never_lost=bool(case % 2)
         )
-        scan = _with_outliers(scan, rng, case % 3)
+        scan = with_outliers(scan, rng, case % 3)
         parents = _parents(truth, rng, 24)
         pieces = parents
         for _ in range(3):
@@ -171,7 +170,7 @@ def test_distances_decided_on_estimates_give_the_exact_rows():
         scan, _, truth = random_scan_case(
             rng, GAMMAS_RAD[case % 3], echoes_never_lost=bool(case % 2)
         )
-        scan = _with_outliers(scan, rng, case % 3)
+        scan = with_outliers(scan, rng, case % 3)
         parents = _parents(truth, rng, 24)
         pieces = parents
         for _ in range(3):

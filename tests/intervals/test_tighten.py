@@ -1,11 +1,11 @@
 """The tightening of kept boxes below eps (intervals/tighten.py) against brute force.
 
-Soundness is checked as in ``tests/intervals/test_contractor.py``: with the simulator's own
-cone model and the readings' error bounds, independently of the interval code, every sampled
-pose that explains all but at most ``q`` readings (no-echo readings counted where they prove
-free space, poses outside the room explaining none) must lie in the tightened set. The poses
-are sampled in the untightened set's boxes, where the consistent poses are, and near the
-truth.
+Soundness is checked as in ``tests/intervals/test_contractor.py``
+(:func:`tests.helpers.wrong_readings`): with the simulator's own cone model and the readings'
+error bounds, independently of the interval code, every sampled pose that explains all but at
+most ``q`` readings (no-echo readings counted where they prove free space, poses outside the
+room explaining none) must lie in the tightened set. The poses are sampled in the untightened
+set's boxes, where the consistent poses are, and near the truth.
 """
 
 from __future__ import annotations
@@ -21,9 +21,17 @@ from intervals.localize import gomne, localize
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tighten import MAX_LEVELS, _clamped, _pieces, tighten
 from intervals.tracker import IntervalTracker, TrackerSettings
-from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges, random_scan_case
-from tests.intervals.test_contractor import _with_outliers, _wrong_readings
-from tests.intervals.test_whole_boxes import HALL_SEGMENTS, _scan, _wrong, hall_truth
+from tests.helpers import (
+    BIG_HALL_SEGMENTS,
+    DEFAULT_BELT,
+    big_hall_scan,
+    big_hall_truth,
+    bounded_readings,
+    cone_ranges,
+    random_scan_case,
+    with_outliers,
+    wrong_readings,
+)
 
 GAMMAS_RAD = (0.05, np.deg2rad(12.5), 0.6)
 
@@ -45,7 +53,7 @@ def _outlier_case(rng, case, half_widths):
     outliers, the prior ``truth -+ half_widths (3,)`` (m, m, rad)."""
     scan, params, truth = random_scan_case(rng, np.deg2rad(12.5), bool(case % 2))
     q = case % 2
-    scan = _with_outliers(scan, rng, q)
+    scan = with_outliers(scan, rng, q)
     return scan, params, truth, q, np.stack([truth - half_widths, truth + half_widths], axis=-1)
 
 
@@ -60,7 +68,7 @@ def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
     for case in range(9):  # every pair of q in 0..2 and levels 3, 6, 9
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
         q = case % 3
-        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        scan = with_outliers(scan, rng, int(rng.integers(0, q + 1)))
         centre = truth + rng.uniform(-1, 1, 3) * np.array([0.2, 0.2, 0.1])
         prior = np.stack([centre - [0.4, 0.4, 0.2], centre + [0.4, 0.4, 0.2]], axis=-1)
         prior[:, 0] = np.minimum(prior[:, 0], truth)
@@ -71,7 +79,7 @@ def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
         levels = (3, 6, 9)[case // 3]
         tight = localize(scan, prior, 0.05, q=q, tighten_levels=levels)
         poses = _poses_in(plain.outer, truth, rng, 2000)
-        fits = _wrong_readings(poses, scan, params) <= q
+        fits = wrong_readings(poses, scan, params) <= q
         inside = contains_points(tight.outer, poses).any(axis=0)
         assert not np.any(fits & ~inside), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
@@ -92,7 +100,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
         small = gomne(scan, prior, 0.05, q_max=2, guaranteed=False, tighten_levels=6)
         assert wide.consistent and small.consistent and small.q <= 2
         poses = _poses_in(plain.paving.outer, truth, rng, 3000)
-        wrong = _wrong_readings(poses, scan, params)
+        wrong = wrong_readings(poses, scan, params)
         assert not np.any((wrong <= 2) & ~contains_points(wide.paving.outer, poses).any(axis=0))
         assert not np.any(
             (wrong <= small.q) & ~contains_points(small.paving.outer, poses).any(axis=0)
@@ -197,9 +205,9 @@ def test_whole_boxes_tightened_keep_every_consistent_pose_and_their_idle_length(
     params, kept, long_kept = DEFAULT_BELT, 0, 0
     for case in range(6):
         where = case % 3
-        truth = hall_truth(rng, where)
-        readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
-        scan = _scan(readings, bool(case % 2), params)
+        truth = big_hall_truth(rng, where)
+        readings = bounded_readings(cone_ranges(truth, BIG_HALL_SEGMENTS, params), params, rng)
+        scan = big_hall_scan(readings, bool(case % 2), params)
         q = case % 3
         initial = np.stack([truth - [2.0, 0.4, 0.15], truth + [2.0, 0.4, 0.15]], axis=1)
         plain = gomne(scan, initial, 0.05, q, whole_boxes=True)
@@ -210,7 +218,7 @@ def test_whole_boxes_tightened_keep_every_consistent_pose_and_their_idle_length(
             [rng.uniform(-2.0, 2.0, count), rng.normal(0, 0.05, count), rng.normal(0, 0.03, count)]
         )
         poses = poses[contains_points(initial[None], poses)[0]]
-        fits = _wrong(poses, scan, params) <= tight.q
+        fits = wrong_readings(poses, scan, params) <= tight.q
         held = contains_points(tight.paving.outer, poses).any(axis=0)
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
@@ -272,7 +280,7 @@ def test_tightened_corridor_strips_keep_every_consistent_pose():
         )
         near = truth + rng.normal(0, 1, (1000, 3)) * np.array([0.003, 0.003, 0.001])
         poses = np.concatenate([_poses_in(plain.paving.outer, truth, rng, 6000), along, near])
-        fits = _wrong_readings(poses, scan, params) <= tight.q
+        fits = wrong_readings(poses, scan, params) <= tight.q
         held = contains_points(tight.paving.outer, poses).any(axis=0)
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
@@ -299,7 +307,7 @@ def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
         assert part.outer.shape[0] <= plain.outer.shape[0] + budget
         assert full.volume() <= part.volume() <= plain.volume()
         poses = _poses_in(plain.outer, truth, rng, 2000)
-        fits = _wrong_readings(poses, scan, params) <= q
+        fits = wrong_readings(poses, scan, params) <= q
         assert not np.any(fits & ~contains_points(part.outer, poses).any(axis=0))
         kept += int(np.count_nonzero(fits))
     assert kept > 200  # the check saw consistent poses
@@ -347,7 +355,7 @@ def test_sivia_s_tests_are_taken_off_the_pass_s_pieces(monkeypatch):
             else:
                 assert seen > 0 and tight.volume() < plain.volume()
             poses = _poses_in(plain.outer, truth, rng, 2000)
-            fits = _wrong_readings(poses, scan, params) <= q
+            fits = wrong_readings(poses, scan, params) <= q
             assert not np.any(fits & ~contains_points(tight.outer, poses).any(axis=0))
             kept += int(np.count_nonzero(fits))
     assert kept > 200  # the check saw consistent poses

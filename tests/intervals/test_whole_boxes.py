@@ -11,41 +11,28 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import shapely
 
 from intervals.boxes import area_xy, contains_points
 from intervals.localize import gomne
 from intervals.sonar.geometry import GUARD_M
 from intervals.sonar.idle import idle_axes, probes
-from intervals.sonar.scan import SonarBelt, SonarScan
 from scenarios.epochs import EpochRunner
 from scenarios.pipeline import _belt
 from scenarios.runner import simulate_spec
 from scenarios.spec import load_scenario, parse_scenario
-from tests.helpers import DEFAULT_BELT, bounded_readings, cone_ranges
-
-HALL = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, 60.0], [0.0, 60.0]])
-HALL_SEGMENTS = np.stack([HALL, np.roll(HALL, -1, axis=0)], axis=1)
-
-
-def hall_truth(rng: np.random.Generator, where: int) -> np.ndarray:
-    """A random pose ``(x_m, y_m, theta_rad)`` in the 60 m hall: ``where`` 0 along the south
-    wall far from the corners, 1 in the south-west corner, 2 in the open, out of every wall's
-    reach."""
-    if where == 0:
-        return np.array([rng.uniform(10, 50), rng.uniform(0.5, 2.5), rng.uniform(-0.3, 0.3)])
-    if where == 1:
-        return np.array([*rng.uniform(0.5, 2.5, 2), rng.uniform(-np.pi, np.pi)])
-    return np.array([*rng.uniform(10, 50, 2), rng.uniform(-np.pi, np.pi)])
-
-
-def _scan(readings, echoes_never_lost=False, params=DEFAULT_BELT):
-    belt = SonarBelt.from_params(params, echoes_never_lost=echoes_never_lost)
-    return SonarScan(HALL_SEGMENTS, belt, readings, HALL)
+from tests.helpers import (
+    BIG_HALL_SEGMENTS,
+    DEFAULT_BELT,
+    big_hall_scan,
+    big_hall_truth,
+    bounded_readings,
+    cone_ranges,
+    wrong_readings,
+)
 
 
 def test_idle_axes_follow_the_walls_in_reach():
-    scan = _scan(np.full(DEFAULT_BELT.mount_xy.shape[0], 2.0))  # echoes: reach about 2 m
+    scan = big_hall_scan(np.full(DEFAULT_BELT.mount_xy.shape[0], 2.0))  # echoes: reach about 2 m
     boxes = np.array(
         [
             [[20.0, 24.0], [1.0, 1.5], [-0.2, 0.2]],  # along the south wall only
@@ -74,7 +61,7 @@ def test_idle_axes_equal_the_definition_on_random_walls():
     oblique walls (some long enough to span a box's reach, some meeting it at its edge) and
     random boxes."""
     rng = np.random.default_rng(17)
-    scan = _scan(np.full(DEFAULT_BELT.mount_xy.shape[0], 2.0))
+    scan = big_hall_scan(np.full(DEFAULT_BELT.mount_xy.shape[0], 2.0))
     assert scan.scene is not None
     reach = scan.reach_m + scan.scene.mount_radius_m + GUARD_M
     checked = np.zeros(3, dtype=int)
@@ -106,21 +93,6 @@ def test_idle_axes_equal_the_definition_on_random_walls():
     assert np.all(checked > 100)  # each axis found idle often
 
 
-def _wrong(poses, scan: SonarScan, params) -> np.ndarray:
-    """Readings the poses ``(P, 3)`` do not explain (no-echo readings where they prove free
-    space), poses outside the hall explaining none."""
-    d = cone_ranges(poses, scan.segments, params)
-    m = scan.readings_m
-    with np.errstate(invalid="ignore"):
-        gap = np.abs(m - d)
-    bound = params.error_abs_bound_m + params.error_rel_bound * np.where(np.isfinite(d), d, 0.0)
-    wrong = np.isfinite(m) & ~((d <= params.d_max_m) & (gap <= bound))
-    if scan.belt.echoes_never_lost:
-        wrong |= ~np.isfinite(m) & (d <= params.d_max_m)
-    room = shapely.contains_xy(shapely.Polygon(HALL), poses[:, 0], poses[:, 1])
-    return np.where(room, np.count_nonzero(wrong, axis=1), scan.belt.count + 1)
-
-
 @pytest.mark.slow
 def test_whole_boxes_keep_every_consistent_pose_along_the_walls_and_in_the_open():
     """Random poses along a wall, in a corner and in the open, echoes lost at random or free
@@ -130,12 +102,12 @@ def test_whole_boxes_keep_every_consistent_pose_along_the_walls_and_in_the_open(
     params, kept, smaller = DEFAULT_BELT, 0, 0
     for case in range(18):
         where = case % 3
-        truth = hall_truth(rng, where)
-        readings = bounded_readings(cone_ranges(truth, HALL_SEGMENTS, params), params, rng)
+        truth = big_hall_truth(rng, where)
+        readings = bounded_readings(cone_ranges(truth, BIG_HALL_SEGMENTS, params), params, rng)
         never_lost = bool(case % 2)
         if not never_lost:
             readings[rng.random(readings.size) < 0.5] = np.inf
-        scan = _scan(readings, never_lost, params)
+        scan = big_hall_scan(readings, never_lost, params)
         q = int(rng.integers(0, 3))
         initial = np.stack([truth - [2.0, 0.4, 0.15], truth + [2.0, 0.4, 0.15]], axis=1)
         whole = gomne(scan, initial, 0.05, q, whole_boxes=True)
@@ -151,7 +123,7 @@ def test_whole_boxes_keep_every_consistent_pose_along_the_walls_and_in_the_open(
             ]
         )
         poses = poses[contains_points(initial[None], poses)[0]]
-        fits = _wrong(poses, scan, params) <= q
+        fits = wrong_readings(poses, scan, params) <= q
         held = contains_points(whole.paving.outer, poses).any(axis=0)
         assert not np.any(fits & ~held), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
