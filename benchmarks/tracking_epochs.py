@@ -87,22 +87,25 @@ def child(plan: str, duration_s: float, repeat: int, out: Path, changes: dict | 
 
     for _ in epochs(load("hall", 3.0), 1):  # loads the compiled kernels, not timed
         pass
-    cpu_ms, areas, held, digest = [], [], 0, hashlib.sha256()
+    cpu_ms, areas, held, coarse, digest = [], [], 0, 0, hashlib.sha256()
     for result, best_s, truth in epochs(load(plan, duration_s), repeat):
         if result.status == "tracking":
             cpu_ms.append(1e3 * best_s)
         if result.paving is not None:
             areas.append(result.paving.area_xy())
+            coarse += int(result.coarse)
             held += int(result.paving.contains(truth[None])[0])
             digest.update(np.ascontiguousarray(result.paving.outer).tobytes())
         digest.update(str(result.status).encode())
     figures = {
         "epochs": len(areas),
+        "mean_ms": float(np.mean(cpu_ms)),
         "median_ms": float(np.median(cpu_ms)),
         "p95_ms": float(np.percentile(cpu_ms, 95)),
         "max_ms": float(np.max(cpu_ms)),
         "mean_area_m2": float(np.mean(areas)),
         "held": held,
+        "coarse": coarse,
         "digest": digest.hexdigest()[:10],
     }
     out.write_text(json.dumps(figures), encoding="utf-8")

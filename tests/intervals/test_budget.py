@@ -223,3 +223,69 @@ def test_corridor_epochs_hold_a_sound_strip_in_few_boxes(contractor):
     assert epochs.box_counts.max() <= 400
     cells = epochs.area_m2 / 0.05**2  # the eps cells the strip's area holds, at least
     assert (epochs.box_counts < cells).sum() > len(cells) / 2
+
+
+def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachable_poses(
+    monkeypatch,
+):
+    """big_hall (60 x 60 m, the sonar's 3 m out of reach of most of it) with half the echoes
+    lost, 6 random walks of 8 epochs from random poses 1.5 to 2.5 m from the south or the west
+    wall, readings at their error bounds: every
+    tracking search tests at most ``LOST_ECHO_TRACKING_TESTS`` boxes in SIVIA and as many again
+    in the retest of the boxes it left (up to 1177 here; with the 40 000 of a belt that never
+    loses its echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
+    pose reachable from the previous true pose within the robot's limits that the exact cone
+    model finds consistent with the scan (at most ``q_max`` readings unexplained), the truth
+    among them, is in the set."""
+    from intervals import tracker as tracker_module
+    from intervals.tracker import LOST_ECHO_TRACKING_TESTS
+    from scenarios.spec import load_scenario
+
+    hall = load_scenario("big_hall").map
+    rng = np.random.default_rng(30)
+    belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=False)
+    counting = _CountingTest(monkeypatch)
+    searches: list[tuple[int, bool]] = []  # (boxes tested, cut short) of each search
+    real_gomne = tracker_module.gomne
+
+    def counted_gomne(*args, **kwargs):
+        before = sum(counting.calls)
+        found = real_gomne(*args, **kwargs)
+        searches.append((sum(counting.calls) - before, found.paving.coarse))
+        return found
+
+    monkeypatch.setattr(tracker_module, "gomne", counted_gomne)
+    settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5)
+    reach = np.array([0.5, 0.5, 0.5])
+    tracker = IntervalTracker(settings, hall.bounds)
+    coarse, checked = 0, 0
+    for _ in range(6):
+        # within the sonar's reach of one wall (along which the sets are strips and shells)
+        truth = np.array(
+            [rng.uniform(2.0, 58.0), rng.uniform(1.5, 2.5), rng.uniform(-np.pi, np.pi)]
+        )
+        if rng.random() < 0.5:
+            truth[:2] = truth[1::-1]
+        previous = None
+        for _ in range(8):
+            last = truth
+            if previous is not None:  # a move within the limits, inside the hall
+                truth = last + rng.uniform(-0.9, 0.9, size=3) * reach
+                truth[:2] = np.clip(truth[:2], 1.0, 59.0)
+                truth[2] = np.mod(truth[2] + np.pi, 2 * np.pi) - np.pi
+            m = bounded_readings(cone_ranges(truth[None], hall.segments)[0], DEFAULT_BELT, rng)
+            m[rng.random(m.shape) < 0.5] = np.inf  # lost echoes
+            scan = SonarScan(hall.segments, belt, m, hall.boundary)
+            searches.clear()
+            result = tracker.step(previous, scan, 1.0)
+            assert result.consistent and result.paving.contains(truth[None])[0]
+            if previous is not None:
+                assert all(tests <= 2 * LOST_ECHO_TRACKING_TESTS for tests, _ in searches)
+                assert result.coarse or not searches[-1][1]
+                coarse += result.coarse
+                poses = _consistent_poses(scan, hall.segments, last, reach, 1, rng, count=400)
+                poses = poses[(poses[:, :2] > 0.5).all(axis=1) & (poses[:, :2] < 59.5).all(axis=1)]
+                assert result.paving.contains(poses).all()
+                checked += len(poses)
+            previous = result.paving
+    assert coarse >= 10 and checked > 1000  # the budget bit, and the check is not vacuous
