@@ -167,10 +167,11 @@ TRACKING_MIN_TESTS = 40_000
 #: cover of its prediction, reported ``coarse``. Where no wall is in reach (big_hall, away from
 #: its walls) only the few echoes kept constrain the set: it is the prediction less thin shells
 #: of poses at an echo's range from some wall, large by nature, and paving those shells buys
-#: little. On big_hall with half its echoes lost (60 s, 61 epochs) the mean set area against
-#: the budget: 40 000 tests 681 m², 4000 477, 2000 531, 1000 564, 600 660, 500 731, at a
-#: tracking CPU mean of 143, 24, 13, 9.0, 5.1 and 5.6 ms (BENCHMARKS.md, "Lost echoes at a
-#: budget of their own").
+#: little. On big_hall with half its echoes lost (60 s, 61 epochs, ``python
+#: benchmarks/lost_echo_budget.py``) the mean set area against the budget: 40 000 tests
+#: 681 m², 4000 477, 2000 531, 1000 564, 600 660, 500 731, at a tracking CPU mean of 132,
+#: 15.5, 9.9, 7.1, 5.2 and 4.6 ms (load 0.7 to 2.6): 600 is the largest whose epoch fits the
+#: 100x real-time target, for sets no larger than at 40 000.
 LOST_ECHO_TRACKING_TESTS = 600
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
