@@ -76,6 +76,15 @@ def machine_line(*packages: str) -> str:
     )
 
 
+def machine_and_load(load_before: float, load_after: float, *packages: str) -> str:
+    """The closing line of a benchmark's output: ``Machine: <machine_line>; 1-minute load X
+    before, Y after.`` (``load_before``, ``load_after``: the 1-minute load averages)."""
+    return (
+        f"Machine: {machine_line(*packages)}; 1-minute load {load_before:.1f} before, "
+        f"{load_after:.1f} after."
+    )
+
+
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
     """A GitHub markdown table."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import code_label, machine_line, markdown_table
+from _common import code_label, machine_and_load, markdown_table
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 SIZES = (10, 100, 1_000, 10_000, 100_000)
@@ -118,10 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
     header = ["code", *(f"N = {n} (ms)" for n in sizes), f"peak memory, N = {sizes[-1]} (MiB)"]
     print(markdown_table(header, rows))
-    print(
-        f"\nMachine: {machine_line('numba', 'scipy')}; 1-minute load {load_before[0]:.1f} "
-        f"before, {load_after[0]:.1f} after."
-    )
+    print("\n" + machine_and_load(load_before[0], load_after[0], "numba", "scipy"))
     return 0
 
 

@@ -22,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from _common import code_label, machine_line, markdown_table
+from _common import code_label, machine_and_load, markdown_table
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 BUDGETS = (40_000, 4000, 2000, 1000, 800, 600, 500)
@@ -88,10 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
     print(f"`{args.plan}`, {args.duration:g} s, code {code_label(REPOSITORY)}:\n")
     print(markdown_table(HEADER, rows))
-    print(
-        f"\nMachine: {machine_line('numba')}; 1-minute load {load_before[0]:.1f} before, "
-        f"{load_after[0]:.1f} after."
-    )
+    print("\n" + machine_and_load(load_before[0], load_after[0], "numba"))
     return 0
 
 

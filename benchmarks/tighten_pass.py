@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import code_label, machine_line, markdown_table
+from _common import code_label, machine_and_load, markdown_table
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 SCENARIO_FOLDER = REPOSITORY / "scenarios" / "builtin"
@@ -154,10 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     header += [f"{label}: us a piece, CPU / wall" for label in labels]
     header += ["CPU ratio", "digests"] if len(trees) == 2 else ["digest"]
     print(markdown_table(header, rows))
-    print(
-        f"\nMachine: {machine_line('numba')}; 1-minute load {load_before:.1f} before, "
-        f"{os.getloadavg()[0]:.1f} after."
-    )
+    print("\n" + machine_and_load(load_before, os.getloadavg()[0], "numba"))
     return 0
 
 

@@ -37,7 +37,7 @@ import numpy as np
 from _common import (
     add_set_argument,
     code_label,
-    machine_line,
+    machine_and_load,
     markdown_table,
     parsed_settings,
     settings_arguments,
@@ -191,10 +191,7 @@ def main(argv: list[str] | None = None) -> int:
             print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
     load_after = os.getloadavg()
     print(markdown_table(HEADER, rows))
-    print(
-        f"\nMachine: {machine_line('numba')}; 1-minute load {load_before[0]:.1f} before, "
-        f"{load_after[0]:.1f} after."
-    )
+    print("\n" + machine_and_load(load_before[0], load_after[0], "numba"))
     return 0
 
 

@@ -117,6 +117,38 @@ def test_lazy_relative_and_dynamic_imports_are_caught(tmp_path):
     ]
 
 
+def imported_test_modules(source: str, module: str) -> list[tuple[int, str]]:
+    """``(line, name)`` of the test modules (``tests.….test_*``) that ``source`` (the text of
+    test module ``module``) imports: by :func:`imported_modules`, and the names of an absolute
+    ``from tests.… import test_x``, which name modules too."""
+    found = imported_modules(source, module, False)
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found += [(node.lineno, f"{node.module}.{alias.name}") for alias in node.names]
+    return sorted(
+        (line, name)
+        for line, name in found
+        if name.startswith("tests.") and name.split(".")[-1].startswith("test_")
+    )
+
+
+def test_imports_of_test_modules_are_found_in_every_form():
+    source = (
+        "import tests.helpers\n"
+        "from tests.helpers import DEFAULT_BELT\n"
+        "from tests.intervals import test_x\n"
+        "from tests.intervals.test_y import case\n"
+        "import tests.intervals.test_z\n"
+        "from . import test_w\n"
+    )
+    assert imported_test_modules(source, "tests.intervals.test_v") == [
+        (3, "tests.intervals.test_x"),
+        (4, "tests.intervals.test_y"),
+        (5, "tests.intervals.test_z"),
+        (6, "tests.intervals.test_w"),
+    ]
+
+
 def test_no_test_module_imports_another_test_module():
     """What test modules share (cases, brute-force counts) lives in ``tests/helpers.py`` or
     ``tests/conftest.py``: a test module imported by another runs its module code there and
@@ -127,7 +159,6 @@ def test_no_test_module_imports_another_test_module():
     bad = []
     for path in modules:
         name = ".".join(path.relative_to(root).with_suffix("").parts)
-        for line, imported in imported_modules(path.read_text(), name, False):
-            if imported.startswith("tests.") and imported.split(".")[-1].startswith("test_"):
-                bad.append(f"{path.relative_to(root)}:{line} imports {imported}")
+        for line, imported in imported_test_modules(path.read_text(), name):
+            bad.append(f"{path.relative_to(root)}:{line} imports {imported}")
     assert bad == []
