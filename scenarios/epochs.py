@@ -73,8 +73,9 @@ class EpochLog:
     the hull of the outer set (NaN without a set; heading within one turn of the first box);
     ``components (E,)``; ``area_m2 (E,)`` (x, y) area of the union of the outer boxes (NaN
     without a set); ``contains_truth (E,)`` bool: some outer box holds the true pose (False
-    without a set); ``elapsed_s (E,)`` wall time per epoch (timing); ``coarse (E,)`` bool: the
-    tracker's budget (``max_boxes``) made the epoch's set a coarser cover.
+    without a set); ``elapsed_s (E,)`` wall time per epoch (timing); ``coarse (E,)`` bool: a
+    budget of the tracker (``max_boxes``, or with lost echoes a tracking epoch's
+    :data:`intervals.tracker.LOST_ECHO_TRACKING_TESTS`) made the epoch's set a coarser cover.
     """
 
     t_s: np.ndarray

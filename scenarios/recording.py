@@ -62,8 +62,10 @@ The localisation pipeline (when the run has an estimation):
 - ``intervals/box_width_m`` (the larger side of the hull of the set), ``intervals/area_m2``,
   ``intervals/epoch_ms``, ``intervals/status`` (the index of ``scenarios.epochs.STATUS``:
   0 global, 1 tracking, 2 inconsistent, 3 lost), ``intervals/q_used`` and
-  ``intervals/coarse`` (1 where the budget ``max_boxes`` made the set a coarser cover, else 0):
-  per-epoch figures, ``Scalars`` (E) styled by ``SeriesLines``;
+  ``intervals/coarse`` (1 where a budget made the set a coarser cover, else 0: ``max_boxes``,
+  or with ``free_space`` false a tracking epoch's tests,
+  :data:`intervals.tracker.LOST_ECHO_TRACKING_TESTS`): per-epoch figures, ``Scalars`` (E)
+  styled by ``SeriesLines``;
 - ``errors/position_m/<branch>``, ``errors/heading_rad/<branch>``: estimation errors,
   ``Scalars`` at the same samples as the estimates, in the branch's colour.
 
@@ -305,7 +307,7 @@ EPOCH_SERIES = {
         interpolation=rr.components.InterpolationMode.StepAfter,
     ),
     "intervals/coarse": SeriesStyle(
-        "coarse: 1 where the budget (max_boxes) coarsened the set",
+        "coarse: 1 where a budget (max_boxes, or lost echoes' tracking tests) coarsened the set",
         (240, 120, 60, 255),
         interpolation=rr.components.InterpolationMode.StepAfter,
     ),
