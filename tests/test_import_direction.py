@@ -36,16 +36,11 @@ def imported_modules(source: str, module: str, is_package: bool) -> list[tuple[i
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             found += [(node.lineno, alias.name) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and not node.level:
-            found.append((node.lineno, node.module or ""))
-        elif isinstance(node, ast.ImportFrom):  # relative: resolved against ``module``
-            parts = module.split(".")
-            base = parts if is_package else parts[:-1]
-            base = base[: len(base) - (node.level - 1)]
-            if node.module:
-                found.append((node.lineno, ".".join([*base, node.module])))
-            else:  # from . import a, b: the names are modules of the base package
-                found += [(node.lineno, ".".join([*base, alias.name])) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and (node.module or not node.level):
+            found.append((node.lineno, from_module(node, module, is_package)))
+        elif isinstance(node, ast.ImportFrom):  # from . import a, b: modules of the package
+            base = from_module(node, module, is_package)
+            found += [(node.lineno, f"{base}.{alias.name}") for alias in node.names]
         elif isinstance(node, ast.Call):
             func = node.func
             called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
@@ -57,6 +52,18 @@ def imported_modules(source: str, module: str, is_package: bool) -> list[tuple[i
             ):
                 found.append((node.lineno, node.args[0].value))
     return sorted(found)
+
+
+def from_module(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    """The absolute name of the module ``X`` of ``from X import ...`` in ``module`` (an
+    ``__init__.py`` when ``is_package``): a relative ``X`` resolved against ``module``'s
+    package, ``from . import a`` giving that package itself."""
+    if not node.level:
+        return node.module or ""
+    parts = module.split(".")
+    base = parts if is_package else parts[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join([*base, *([node.module] if node.module else [])])
 
 
 def violations(root: Path, package: str) -> list[str]:
@@ -117,36 +124,70 @@ def test_lazy_relative_and_dynamic_imports_are_caught(tmp_path):
     ]
 
 
-def imported_test_modules(source: str, module: str) -> list[tuple[int, str]]:
-    """``(line, name)`` of the test modules (``tests.….test_*``) that ``source`` (the text of
-    test module ``module``) imports: by :func:`imported_modules`, and the names of an absolute
-    ``from tests.… import test_x``, which name modules too."""
+def imported_test_modules(source: str, module: str, root: Path) -> list[tuple[int, str]]:
+    """``(line, name)`` of the test modules (``tests/…/test_*.py`` under ``root``) that
+    ``source`` (the text of test module ``module``) imports, each once a line: every module
+    :func:`imported_modules` finds, and for ``from X import a`` (absolute or relative) also
+    ``X.a``, as ``a`` may be a module of package ``X``. A name is a test module's when, cut
+    after its first part starting with ``test_`` (``tests.a.test_b.f``: ``tests.a.test_b``),
+    it names such a file (``from tests.helpers import test_data`` imports no test module)."""
     found = imported_modules(source, module, False)
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.ImportFrom) and node.module and not node.level:
-            found += [(node.lineno, f"{node.module}.{alias.name}") for alias in node.names]
-    return sorted(
-        (line, name)
-        for line, name in found
-        if name.startswith("tests.") and name.split(".")[-1].startswith("test_")
-    )
+        if isinstance(node, ast.ImportFrom) and node.module:
+            base = from_module(node, module, False)
+            found += [(node.lineno, f"{base}.{alias.name}") for alias in node.names]
+    test_modules = set()
+    for line, name in found:
+        parts = name.split(".")
+        first = next((i for i, part in enumerate(parts) if part.startswith("test_")), None)
+        if parts[0] == "tests" and first is not None:
+            path = root.joinpath(*parts[: first + 1]).with_suffix(".py")
+            if path.is_file():
+                test_modules.add((line, ".".join(parts[: first + 1])))
+    return sorted(test_modules)
 
 
-def test_imports_of_test_modules_are_found_in_every_form():
-    source = (
-        "import tests.helpers\n"
-        "from tests.helpers import DEFAULT_BELT\n"
-        "from tests.intervals import test_x\n"
-        "from tests.intervals.test_y import case\n"
-        "import tests.intervals.test_z\n"
-        "from . import test_w\n"
+def imports_of_test_modules(root: Path) -> list[str]:
+    """``"file:line imports name"`` for each import of a test module by a test module
+    (``root / "tests"``, every ``test_*.py`` below it)."""
+    bad = []
+    for path in sorted((root / "tests").rglob("test_*.py")):
+        name = ".".join(path.relative_to(root).with_suffix("").parts)
+        for line, imported in imported_test_modules(path.read_text(), name, root):
+            bad.append(f"{path.relative_to(root)}:{line} imports {imported}")
+    return bad
+
+
+def test_a_test_module_importing_another_in_any_form_is_reported(tmp_path):
+    """The checker itself, on a made-up tree: one test module per form of importing test module
+    ``tests/a/test_b.py``, each reported at its line; a module importing only helpers is not."""
+    forms = {
+        "test_import": "import tests.a.test_b\n",
+        "test_import_as": "import tests.a.test_b as b\n",
+        "test_from_package": "from tests.a import helpers, test_b\n",
+        "test_from_module": "from tests.a.test_b import f\n",
+        "test_from_dot": "from . import test_b\n",
+        "test_from_dot_module": "from .test_b import f\n",
+        "test_from_parent_package": "from ..a import test_b\n",
+        "test_from_parent_module": "from ..a.test_b import f\n",
+        "test_dynamic": "import importlib\nb = importlib.import_module('tests.a.test_b')\n",
+        "test_lazy": "def later():\n    from tests.a.test_b import f as g\n    return g\n",
+    }
+    package = tmp_path / "tests" / "a"
+    package.mkdir(parents=True)
+    for init in (tmp_path / "tests", package):
+        (init / "__init__.py").write_text("")
+    (package / "helpers.py").write_text("test_data = 1\n")
+    (package / "test_b.py").write_text("def f():\n    return 1\n")
+    (package / "test_fine.py").write_text(
+        "import tests.a.helpers\nfrom tests.a.helpers import test_data\nfrom . import helpers\n"
     )
-    assert imported_test_modules(source, "tests.intervals.test_v") == [
-        (3, "tests.intervals.test_x"),
-        (4, "tests.intervals.test_y"),
-        (5, "tests.intervals.test_z"),
-        (6, "tests.intervals.test_w"),
-    ]
+    for name, source in forms.items():
+        (package / f"{name}.py").write_text(source)
+    lines = {"test_dynamic": 2, "test_lazy": 2}
+    assert imports_of_test_modules(tmp_path) == sorted(
+        f"tests/a/{name}.py:{lines.get(name, 1)} imports tests.a.test_b" for name in forms
+    )
 
 
 def test_no_test_module_imports_another_test_module():
@@ -154,11 +195,5 @@ def test_no_test_module_imports_another_test_module():
     ``tests/conftest.py``: a test module imported by another runs its module code there and
     ties the two modules' private names together."""
     root = Path(__file__).resolve().parent.parent
-    modules = sorted((root / "tests").rglob("test_*.py"))
-    assert len(modules) > 20  # found, not an empty check
-    bad = []
-    for path in modules:
-        name = ".".join(path.relative_to(root).with_suffix("").parts)
-        for line, imported in imported_test_modules(path.read_text(), name):
-            bad.append(f"{path.relative_to(root)}:{line} imports {imported}")
-    assert bad == []
+    assert len(list((root / "tests").rglob("test_*.py"))) > 20  # found, not an empty check
+    assert imports_of_test_modules(root) == []
