@@ -338,7 +338,8 @@ def _pave(
         if ray_test and (idx := np.flatnonzero(keep)).size:
             rejects[idx] = recount(b[idx], reject[idx])
             keep[idx] = rejects[idx] <= q
-        return keep, rejects
+        # the sensors rejecting every pose of a piece: its contractor takes them as wrong
+        return keep, rejects, reject
 
     def contracted(b):  # the boxes clipped to the regions of ``within``, then by the echoes
         if within is None:
@@ -386,7 +387,11 @@ def _pave(
                 paving.boundary,
                 rejects,
                 counted,
-                (lambda b: contractor.contract(b, local, q, validated=True)) if contract else None,
+                (
+                    (lambda b, wrong: contractor.contract(b, local, q, validated=True, wrong=wrong))
+                    if contract
+                    else None
+                ),
                 scale * pose_scale(HEADING_CUT_WEIGHT),
                 tighten_levels,
                 max_boxes=max_boxes,

@@ -82,15 +82,18 @@ import numpy as np
 from intervals.boxes import bisect_into, widths
 from intervals.errors import IntervalError
 
-CountedTest = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
-"""``test(boxes (N, d, 2), parents (P, d, 2)) -> (keep (N,) bool, counts (N,) int)``: ``keep``
-False only when no point of the box is in the set; ``counts`` per box (e.g. the sensors
-rejecting it). Box ``n`` is a part of ``parents[n % P]`` (a test may use what it proves for the
-parent, e.g. :mod:`intervals.sonar.pieces`)."""
+CountedTest = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray | None]]
+"""``test(boxes (N, d, 2), parents (P, d, 2)) -> (keep (N,) bool, counts (N,) int, proof)``:
+``keep`` False only when no point of the box is in the set; ``counts`` per box (e.g. the
+sensors rejecting it); ``proof (N, ...)``: what the test proved of each box, handed to the
+contractor with the kept boxes (e.g. which sensors reject it; None: nothing). Box ``n`` is a
+part of ``parents[n % P]`` (a test may use what it proves for the parent, e.g.
+:mod:`intervals.sonar.pieces`)."""
 
-Contractor = Callable[[np.ndarray], np.ndarray]
-"""``contract(boxes (N, d, 2)) -> (N, d, 2)``: each row inside its input row (clipped here)
-holding every point of it in the set; a row with none is NaN."""
+Contractor = Callable[[np.ndarray, np.ndarray | None], np.ndarray]
+"""``contract(boxes (N, d, 2), proof (N, ...) or None) -> (N, d, 2)``: each row inside its input
+row (clipped here) holding every point of it in the set; a row with none is NaN. ``proof``:
+the test's rows of these boxes (:data:`CountedTest`)."""
 
 IdleAxes = Callable[[np.ndarray], np.ndarray]
 """``idle(boxes (N, d, 2)) -> (N, d) bool``: the axes along which cutting a box cannot separate
@@ -183,12 +186,13 @@ def tighten(
         children = _pieces(parents, scale, still, cuts)
         done += cuts
         tested += children.shape[0]
-        keep, child_counts = test(children, parents)
+        keep, child_counts, proof = test(children, parents)
         keep = np.asarray(keep, dtype=bool)
         tested_index = np.flatnonzero(keep)  # each kept child's place among those tested
         children, child_counts = children[keep], np.asarray(child_counts)[keep]
         if contract is not None and children.shape[0]:
-            c = np.ascontiguousarray(contract(children), dtype=np.float64)
+            proof = None if proof is None else np.asarray(proof)[keep]
+            c = np.ascontiguousarray(contract(children, proof), dtype=np.float64)
             children, full = _clamped(c, np.ascontiguousarray(children))
             child_counts, tested_index = child_counts[full], tested_index[full]
         boxes = np.concatenate([children, boxes[rest]])

@@ -40,6 +40,15 @@ segment loop of a box stops once at most ``q`` echo sensors can still contract i
 one allows the whole box already, so no ``(q + 1)``-th bound can move: the box is returned as
 it is, which is always sound).
 
+Known wrong readings. A caller that has proved sensor ``i``'s reading wrong at every pose
+of a box (a sound box test rejecting the box by that sensor, :mod:`intervals.sonar.pieces`)
+may say so (``wrong``): ``A_i`` is then empty, which it is (no pose of the box is right for
+``i``), so a pose with at most ``q`` wrong readings is wrong at most ``q - c`` times among
+the other sensors (``c`` known wrong): the bounds become the ``(q - c + 1)``-th of the other
+sensors' (for ``c = q`` their intersection, ``q = 0``, not the ``q = 1`` bound that lets one
+sensor be ignored), and a box with ``c > q`` is empty. The tightening's pieces, tested before
+they are contracted, hand their rejection rows here (:mod:`intervals.tighten`).
+
 Cost. Each segment is checked against the hull of the ``Q_i`` by its bounding box (the scan's
 segments are those within reach of the paved boxes), then against each ``Q_i``; the
 offset and polar boxes, which depend on the heading only, are kept for the last
@@ -206,11 +215,11 @@ def _same_key(keys, s, key):
 
 
 @numba.njit(cache=True)
-def _hit_rows(box, ranges, kind, guard_m, rows):
+def _hit_rows(box, ranges, kind, guard_m, wrong, rows):
     """Hit boxes ``Q_i = box + O_i + V_i`` (widened) of every echo sensor of ``rows (k,
-    ROW_COLUMNS)`` (``O_i, V_i`` filled by :func:`_turned_rows` for the heading of ``box``), and
-    every ``A_i`` set empty (filled by the segments). Returns the hull ``(x_lo, x_hi, y_lo,
-    y_hi)`` of the ``Q_i``."""
+    ROW_COLUMNS)`` not ``wrong (k,)`` (``O_i, V_i`` filled by :func:`_turned_rows` for the
+    heading of ``box``), and every ``A_i`` set empty (filled by the segments). Returns the hull
+    ``(x_lo, x_hi, y_lo, y_hi)`` of the ``Q_i``."""
     hx_lo, hx_hi, hy_lo, hy_hi = np.inf, -np.inf, np.inf, -np.inf
     for i in range(rows.shape[0]):
         rows[i, A_XL], rows[i, A_XH], rows[i, A_YL], rows[i, A_YH] = (
@@ -219,7 +228,7 @@ def _hit_rows(box, ranges, kind, guard_m, rows):
             np.inf,
             -np.inf,
         )
-        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1]:
+        if kind[i] != ECHO or not ranges[i, 0] <= ranges[i, 1] or wrong[i]:
             continue
         q_xl = box[0, 0] + rows[i, O_XL] + rows[i, V_XL] - guard_m
         q_xh = box[0, 1] + rows[i, O_XH] + rows[i, V_XH] + guard_m
@@ -313,19 +322,21 @@ def _largest(values, q, top):
 
 
 @numba.njit(cache=True)
-def _relaxed_bounds(rows, kind, box, q, lows, highs, top, out):
+def _relaxed_bounds(rows, kind, wrong, box, q, lows, highs, top, out):
     """The q-relaxed ``(x_lo, x_hi, y_lo, y_hi)`` into ``out (4,)``: per axis the ``(q + 1)``-th
     largest lower bound and the ``(q + 1)``-th smallest upper bound of the sensors' allowed
-    boxes (a sensor without an echo allows the whole box); ``lows, highs (k,)``, ``top (q +
-    1,)``: scratch (the upper bounds negated, so that the smallest is the largest of their
-    negatives, exactly). Returns ``out``."""
+    boxes (a sensor without an echo allows the whole box, one ``wrong (k,)`` nothing); ``lows,
+    highs (k,)``, ``top (q + 1,)``: scratch (the upper bounds negated, so that the smallest is
+    the largest of their negatives, exactly). Returns ``out``."""
     k = rows.shape[0]
     for axis in range(2):
         if q >= k:
             out[2 * axis], out[2 * axis + 1] = box[axis, 0], box[axis, 1]
             continue
         for i in range(k):
-            if kind[i] == ECHO:
+            if wrong[i]:  # allows no pose of the box: an empty A_i
+                lows[i], highs[i] = np.inf, np.inf
+            elif kind[i] == ECHO:
                 lows[i] = rows[i, A_XL + 2 * axis]
                 highs[i] = -rows[i, A_XH + 2 * axis]
             else:
@@ -353,6 +364,8 @@ def contract_into(
     params,
     q,
     passes,
+    wrong,
+    has_wrong,
     out,
 ):
     """Contract every box of ``boxes (N, 3, 2)`` into ``out (N, 3, 2)`` (module doc).
@@ -366,7 +379,9 @@ def contract_into(
     that hull;
     ``ranges (k, 2)``, ``kind (k,)``: the scan's reading intervals; ``belt (k, 8)``: the belt's
     kernel table; ``params``: see :func:`_turned_rows`; ``q``: the relaxation; ``passes``:
-    forward-backward passes. An empty result row is all NaN.
+    forward-backward passes; ``wrong (N, k)`` bool (with ``has_wrong``, else ``(0, k)``): the
+    sensors known to be wrong at every pose of each box (module doc, "Known wrong readings").
+    An empty result row is all NaN.
     """
     k = belt.shape[0]
     # the rows of the last HEADING_SLOTS heading intervals met (their O_i and V_i computed once;
@@ -381,15 +396,24 @@ def contract_into(
     echoes = 0
     for i in range(k):
         echoes += 1 if kind[i] == ECHO else 0
-    if echoes <= q:  # no (q + 1)-th bound can move (see the module doc): nothing to contract
+    if echoes <= q and not has_wrong:  # no (q + 1)-th bound can move (module doc): as they are
         out[:, :, :] = boxes
         return
+    right = np.zeros(k, dtype=np.bool_)  # the wrong row of a box without known wrong readings
     work = np.empty((3, 2))
     nx, ny = grid_shape[0], grid_shape[1]
     seen = np.zeros(segments.shape[0], dtype=np.int64)  # stamp of the last pass that met it
     stamp = 0
     for n in range(boxes.shape[0]):
         work[:, :] = boxes[n]
+        known = wrong[n] if has_wrong else right
+        # the other sensors may be wrong at q - known_count of a pose's readings at most
+        q_left = q
+        for i in range(k):
+            q_left -= 1 if known[i] else 0
+        if q_left < 0:  # more than q readings wrong at every pose of the box
+            out[n, :, :] = np.nan
+            continue
         empty = False
         # everything _turned_rows reads of the box (the passes leave the heading as it is)
         key[0], key[1] = work[2, 0], work[2, 1]
@@ -417,14 +441,15 @@ def contract_into(
         rows = tables[slot]
         for _ in range(passes):
             stamp += 1
-            hx_lo, hx_hi, hy_lo, hy_hi = _hit_rows(work, ranges, kind, guard_m, rows)
-            # sensors that can still contract: the echoes (A_i starts empty); once at most q
-            # remain, no face can move (the (q + 1)-th bound is the box's), so stop early
-            # (an empty reading interval counts as remaining: it never allows the whole box)
+            hx_lo, hx_hi, hy_lo, hy_hi = _hit_rows(work, ranges, kind, guard_m, known, rows)
+            # sensors that can still contract: the echoes not known wrong (A_i starts empty);
+            # once at most q_left remain, no face can move (the (q + 1)-th bound is the box's,
+            # the known wrong taking q - q_left of the q + 1 places), so stop early (an empty
+            # reading interval counts as remaining: it never allows the whole box)
             remaining = 0
             for i in range(k):
-                done[i] = not (kind[i] == ECHO and ranges[i, 0] <= ranges[i, 1])
-                remaining += 1 if kind[i] == ECHO else 0
+                done[i] = known[i] or not (kind[i] == ECHO and ranges[i, 0] <= ranges[i, 1])
+                remaining += 1 if kind[i] == ECHO and not known[i] else 0
             if hx_lo <= hx_hi:  # some echo: the segments whose bounding box meets a hit box
                 # only a segment with a point in some Q_i (so in their hull) can widen an A_i;
                 # the grid registers it in that point's cell, inside the hull's cell range
@@ -436,10 +461,10 @@ def contract_into(
                 # a hull beyond the grid's last row or column meets no cell (and its row
                 # range would index past ``grid_starts``)
                 for ix in range(ix0, ix1 + 1 if iy0 <= iy1 else ix0):
-                    if remaining <= q:
+                    if remaining <= q_left:
                         break
                     for member in range(grid_starts[ix * ny + iy0], grid_starts[ix * ny + iy1 + 1]):
-                        if remaining <= q:
+                        if remaining <= q_left:
                             break
                         j = grid_members[member]
                         if seen[j] == stamp or not allowed[j]:
@@ -454,7 +479,7 @@ def contract_into(
                         remaining -= _segment_backward(
                             ax, ay, bx - ax, by - ay, work, rows, done, guard_m
                         )
-            b = _relaxed_bounds(rows, kind, work, q, lows, highs, top, bounds)
+            b = _relaxed_bounds(rows, kind, known, work, q, lows, highs, top, bounds)
             if not (b[0] <= b[1] and b[2] <= b[3]):
                 empty = True
                 break
@@ -474,13 +499,21 @@ def contract_into(
 
 
 def contract(
-    boxes, scan: SonarScan, q: int = 0, passes: int = DEFAULT_PASSES, validated: bool = False
+    boxes,
+    scan: SonarScan,
+    q: int = 0,
+    passes: int = DEFAULT_PASSES,
+    validated: bool = False,
+    wrong: np.ndarray | None = None,
 ) -> np.ndarray:
     """Pose boxes ``(N, 3, 2)`` contracted by the scan's echoes at relaxation ``q`` (module
     doc): each row lies in the input row and holds every pose of it at which at most ``q``
     readings are wrong; a row with no such pose is NaN. The heading is left as it is.
     ``validated``: ``boxes`` is already a checked float64 ``(N, 3, 2)`` array
-    (:func:`intervals.boxes.as_boxes`, e.g. a SIVIA frontier), not checked again."""
+    (:func:`intervals.boxes.as_boxes`, e.g. a SIVIA frontier), not checked again.
+    ``wrong (N, k)`` bool: sensors whose reading is wrong at every pose of the box (e.g. the
+    rows of a sound box test's rejections; module doc, "Known wrong readings"); None: none
+    known."""
     if not validated:
         boxes = as_boxes(boxes)
         if boxes.shape[1] != 3:
@@ -494,6 +527,12 @@ def contract(
     if boxes.shape[0] == 0:
         return out
     belt = scan.belt
+    if wrong is not None:
+        wrong = np.ascontiguousarray(wrong, dtype=bool)
+        if wrong.shape != (boxes.shape[0], belt.count):
+            raise IntervalError(
+                f"contractor: wrong must be ({boxes.shape[0]}, {belt.count}), got {wrong.shape}"
+            )
     params = np.array(
         [
             belt.half_aperture_rad,
@@ -524,6 +563,8 @@ def contract(
         params,
         int(q),
         int(passes),
+        np.zeros((0, belt.count), dtype=bool) if wrong is None else wrong,
+        wrong is not None,
         out,
     )
     return out

@@ -18,6 +18,7 @@ from intervals.boxes import clip_to_boxes, meets_any_box, volume
 from intervals.errors import IntervalError
 from intervals.localize import box_test, gomne, localize
 from intervals.sivia import INSIDE, OUTSIDE, UNDECIDED, sivia
+from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.contractor import HEADING_SLOTS, contract, shave
 from intervals.sonar.scan import SonarBelt, SonarScan
 from robotsim.maps import builtin_map
@@ -394,3 +395,49 @@ def test_the_relaxed_bound_is_the_sorted_rank():
         q = int(rng.integers(0, k))
         got = _largest(values.copy(), q, np.empty(q + 1))
         assert got == np.sort(values)[k - 1 - q]
+
+
+@pytest.mark.parametrize("gamma", GAMMAS_RAD[1:3])
+def test_readings_known_wrong_keep_every_pose_with_at_most_q_wrong_readings(gamma):
+    """The rejection rows of the box test handed in as known wrong readings (``wrong``):
+    random rooms, belts, outliers, q in 0..2, boxes round the truth; every sampled pose with at
+    most ``q`` wrong readings (free space included where the scan uses it) stays in the
+    contracted box, which is inside the plain contraction and, over the cases, smaller. A
+    reading marked wrong that is not (the rows shifted to other sensors) loses poses: the
+    check sees the rule."""
+    rng = np.random.default_rng(int(gamma * 1e6) + 11)
+    kept, narrower, lost_when_false = 0, 0.0, 0
+    for case in range(30):
+        scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
+        q = case % 3
+        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        boxes = boxes_around(truth, rng, 60)
+        rows = sensor_verdicts(boxes, scan, False)[0]
+        out = contract(boxes, scan, q, wrong=rows)
+        plain = contract(boxes, scan, q)
+        full = ~np.isnan(out).any(axis=(1, 2))
+        assert np.all(out[full, :, 0] >= plain[full, :, 0])
+        assert np.all(out[full, :, 1] <= plain[full, :, 1])
+        poses = _sample(boxes, truth, rng, 40)
+        fits = _wrong_readings(poses, scan, params) <= q
+        assert not np.any(fits & ~_inside(poses, out)), f"case {case}: a consistent pose lost"
+        kept += int(np.count_nonzero(fits))
+        narrower += volume(np.where(np.isnan(plain), 0.0, plain)) - volume(
+            np.where(np.isnan(out), 0.0, out)
+        )
+        false = contract(boxes, scan, q, wrong=np.roll(rows, 1, axis=1) & ~rows)
+        lost_when_false += int(np.count_nonzero(fits & ~_inside(poses, false)))
+    assert kept > 1000  # the check saw many consistent poses
+    assert narrower > 0  # the known wrong readings narrowed some boxes
+    assert lost_when_false > 0
+
+
+def test_known_wrong_readings_are_checked_and_more_than_q_empty_the_box():
+    scan, _, truth = random_scan_case(np.random.default_rng(3), 0.2, echoes_never_lost=False)
+    box = np.stack([truth - 0.05, truth + 0.05], axis=-1)[None]
+    wrong = np.zeros((1, scan.belt.count), dtype=bool)
+    assert np.array_equal(contract(box, scan, 1, wrong=wrong), contract(box, scan, 1))
+    wrong[0, :2] = True
+    assert np.isnan(contract(box, scan, 1, wrong=wrong)).all()
+    with pytest.raises(IntervalError, match="wrong must be"):
+        contract(box, scan, 1, wrong=wrong[:, 1:])

@@ -112,7 +112,7 @@ def _disk(boxes, parents=None):
     """``(keep, counts)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
-    return near <= 1.0, (near > 0.5).astype(np.int64)
+    return near <= 1.0, (near > 0.5).astype(np.int64), None
 
 
 def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
@@ -147,7 +147,7 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     assert np.array_equal(halved_counts, _disk(halved)[1])
 
     # a contractor that empties a row drops it; one that widens a row is clipped to it
-    def widening(b):
+    def widening(b, proof):
         c = b.copy()
         c[:, :, 0] -= 1.0
         c[0] = np.nan
@@ -163,7 +163,7 @@ def _slab(boxes, parents=None):
     within one such strip, x idle in it): exact interval bounds."""
     centre = 0.1 * np.floor(boxes[:, 0, 0])
     gap = np.maximum(boxes[:, 1, 0] - centre, centre - boxes[:, 1, 1])
-    return gap <= 0.15, np.zeros(boxes.shape[0], dtype=np.int64)
+    return gap <= 0.15, np.zeros(boxes.shape[0], dtype=np.int64), None
 
 
 def test_tighten_never_cuts_an_idle_axis_and_keeps_boxes_idle_on_every_axis():
@@ -369,7 +369,7 @@ def _block_and_sheet(boxes, parents=None):
     g_lo = lo[:, 2] - 0.3 * hi[:, 0] - 0.2 * hi[:, 1]
     g_hi = hi[:, 2] - 0.3 * lo[:, 0] - 0.2 * lo[:, 1]
     sheet = (g_lo <= 0.02) & (g_hi >= -0.02) & (lo[:, 0] <= 4.0) & (hi[:, 0] >= 2.0)
-    return cube | sheet, np.zeros(boxes.shape[0], dtype=np.int64)
+    return cube | sheet, np.zeros(boxes.shape[0], dtype=np.int64), None
 
 
 def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
