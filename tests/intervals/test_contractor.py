@@ -398,7 +398,7 @@ def test_the_relaxed_bound_is_the_sorted_rank():
 
 
 @pytest.mark.parametrize("gamma", GAMMAS_RAD[1:3])
-def test_readings_known_wrong_keep_every_pose_with_at_most_q_wrong_readings(gamma):
+def test_readings_known_wrong_keep_every_pose_with_at_most_qwrong_readings(gamma):
     """The rejection rows of the box test handed in as known wrong readings (``wrong``):
     random rooms, belts, outliers, q in 0..2, boxes round the truth; every sampled pose with at
     most ``q`` wrong readings (free space included where the scan uses it) stays in the
@@ -410,7 +410,7 @@ def test_readings_known_wrong_keep_every_pose_with_at_most_q_wrong_readings(gamm
     for case in range(30):
         scan, params, truth = random_scan_case(rng, gamma, echoes_never_lost=bool(case % 2))
         q = case % 3
-        scan = _with_outliers(scan, rng, int(rng.integers(0, q + 1)))
+        scan = with_outliers(scan, rng, int(rng.integers(0, q + 1)))
         boxes = boxes_around(truth, rng, 60)
         rows = sensor_verdicts(boxes, scan, False)[0]
         out = contract(boxes, scan, q, wrong=rows)
@@ -418,8 +418,8 @@ def test_readings_known_wrong_keep_every_pose_with_at_most_q_wrong_readings(gamm
         full = ~np.isnan(out).any(axis=(1, 2))
         assert np.all(out[full, :, 0] >= plain[full, :, 0])
         assert np.all(out[full, :, 1] <= plain[full, :, 1])
-        poses = _sample(boxes, truth, rng, 40)
-        fits = _wrong_readings(poses, scan, params) <= q
+        poses = sample_in_boxes(boxes, truth, rng, 40)
+        fits = wrong_readings(poses, scan, params) <= q
         assert not np.any(fits & ~_inside(poses, out)), f"case {case}: a consistent pose lost"
         kept += int(np.count_nonzero(fits))
         narrower += volume(np.where(np.isnan(plain), 0.0, plain)) - volume(

@@ -109,7 +109,7 @@ def test_gomne_sets_stay_sound_and_the_counts_follow_the_pieces():
 
 
 def _disk(boxes, parents=None):
-    """``(keep, counts)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
+    """``(keep, counts, proof None)`` for the unit disk: the exact interval bound of ``x^2 + y^2``."""
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     near = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(lo**2, hi**2)).sum(axis=1)
     return near <= 1.0, (near > 0.5).astype(np.int64), None
@@ -120,7 +120,7 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
     less area; each piece carries its own test count; the caps stop it with a set as sound."""
     edges = list(itertools.pairwise(np.linspace(-1.2, 1.2, 7)))
     cells = np.array([[x, y] for x in edges for y in edges])
-    keep, counts = _disk(cells)
+    keep, counts, _ = _disk(cells)
     cells, counts = cells[keep], counts[keep]
     n = cells.shape[0]
     points = np.random.default_rng(2).uniform(-1, 1, (3000, 2))
@@ -159,7 +159,7 @@ def test_tighten_covers_the_disk_counts_each_piece_and_stops_at_its_caps():
 
 
 def _slab(boxes, parents=None):
-    """``(keep, counts)`` for the slabs ``|y - 0.1 k| <= 0.15`` over ``k <= x < k + 1`` (a box
+    """``(keep, counts, proof None)`` for the slabs ``|y - 0.1 k| <= 0.15`` over ``k <= x < k + 1`` (a box
     within one such strip, x idle in it): exact interval bounds."""
     centre = 0.1 * np.floor(boxes[:, 0, 0])
     gap = np.maximum(boxes[:, 1, 0] - centre, centre - boxes[:, 1, 1])
@@ -173,7 +173,7 @@ def test_tighten_never_cuts_an_idle_axis_and_keeps_boxes_idle_on_every_axis():
     is smaller than with the same cuts spent partly across x."""
     edges = list(itertools.pairwise(np.linspace(0.0, 3.0, 4)))
     cells = np.array([[x, y] for x in edges for y in itertools.pairwise(np.linspace(-1, 1, 9))])
-    keep, counts = _slab(cells)
+    keep, counts, _ = _slab(cells)
     cells, counts = cells[keep], counts[keep]
 
     def idle(b):
@@ -362,7 +362,7 @@ def test_sivia_s_tests_are_taken_off_the_pass_s_pieces(monkeypatch):
 
 
 def _block_and_sheet(boxes, parents=None):
-    """``(keep, counts)`` for the union of the cube ``[0, 1]^3`` and the sheet
+    """``(keep, counts, proof None)`` for the union of the cube ``[0, 1]^3`` and the sheet
     ``|z - 0.3 x - 0.2 y| <= 0.02`` over ``2 <= x <= 4``: exact interval bounds of each part."""
     lo, hi = boxes[:, :, 0], boxes[:, :, 1]
     cube = np.all((lo <= 1.0) & (hi >= 0.0), axis=1)
