@@ -232,8 +232,8 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
     lost, 6 random walks of 8 epochs from random poses 1.5 to 2.5 m from the south or the west
     wall, readings at their error bounds: every
     tracking search tests at most ``LOST_ECHO_TRACKING_TESTS`` boxes in SIVIA and as many again
-    in the retest of the boxes it left (up to 1177 here; with the 40 000 of a belt that never
-    loses its echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
+    in the retest of the boxes it left (with the 40 000 of a belt that never loses its
+    echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
     pose reachable from the previous true pose within the robot's limits that the exact cone
     model finds consistent with the scan (at most ``q_max`` readings unexplained), the truth
     among them, is in the set."""
