@@ -62,7 +62,7 @@ from intervals.localize import (
     gomne,
 )
 from intervals.sivia import OUTSIDE
-from intervals.sonar.scan import SonarScan
+from intervals.sonar.scan import IGNORED, SonarScan
 from intervals.tighten import MAX_LEVELS
 from validated_records import bounded, validate_fields
 
@@ -168,11 +168,36 @@ TRACKING_MIN_TESTS = 40_000
 #: its walls) only the few echoes kept constrain the set: it is the prediction less thin shells
 #: of poses at an echo's range from some wall, large by nature, and paving those shells buys
 #: little. On big_hall with half its echoes lost (60 s, 61 epochs, ``python
-#: benchmarks/lost_echo_budget.py``) the mean set area against the budget: 40 000 tests
-#: 681 m², 4000 477, 2000 531, 1000 564, 600 660, 500 731, at a tracking CPU mean of 132,
-#: 15.5, 9.9, 7.1, 5.2 and 4.6 ms (load 0.7 to 2.6): 600 is the largest whose epoch fits the
-#: 100x real-time target, for sets no larger than at 40 000.
-LOST_ECHO_TRACKING_TESTS = 600
+#: benchmarks/lost_echo_budget.py``), session 30, the mean set area against the budget: 40 000
+#: tests 681 m², 4000 477, 2000 531, 1000 564, 600 660, 500 731, at a tracking CPU mean of 132,
+#: 15.5, 9.9, 7.1, 5.2 and 4.6 ms (load 0.7 to 2.6). Session 31, with the global search at
+#: :data:`LOST_ECHO_GLOBAL_EPS_M` and scans without constraint predicted box by box
+#: (:data:`LOST_ECHO_PREDICTED_BOXES`): 600 tests 489 m², 400 528, 300 594, at a tracking CPU
+#: mean / p95 of 5.3 / 9.3, 3.2 / 6.4 and 2.9 / 5.4 ms (load 2.9, another job running): 400,
+#: for sets still smaller than session 30's at 600 (closed loop, ``benchmarks/buildings.py``:
+#: 507 against 511 m²).
+LOST_ECHO_TRACKING_TESTS = 400
+
+#: A global search of a belt that may lose its echoes paves at this precision, m (or at
+#: ``eps_m`` when coarser), and hands its set on as a :class:`Refinement` of its report, so
+#: that the next epoch paves its prediction under the full budget (``TESTS_PER_BOX``). Its few
+#: echoes leave a set large by nature: on big_hall with half its echoes lost the first scan's
+#: three echoes leave strips of poses along the walls, 90 m² in more than 10 000 boxes at
+#: ``eps_m`` 0.05 (68 000 box tests, 107 to 150 ms CPU), 189 m² in 365 boxes at 0.2 (36 ms)
+#: and 487 m² at 0.4 (24 ms), and the next epoch's six echoes bring each to the same 0.13 m²
+#: (``benchmarks/lost_echo_budget.py``, the first two epochs).
+LOST_ECHO_GLOBAL_EPS_M = 0.2
+
+#: A tracking epoch of a belt that may lose its echoes whose scan has at most ``q_max``
+#: readings that constrain (echoes; no-echo readings are ignored) can reject no pose by the
+#: sonar: its set is its prediction, predicted box by box (each box of the previous set grown
+#: by the limits, coarsened to at most this many boxes, :func:`intervals.imagesp.coarsen`)
+#: instead of from the hulls of the previous set's components, which for a strip along two
+#: walls is a square of a wall's length (big_hall with half its echoes lost, one echo: 3670 m²
+#: from a set of 644). On that run (60 s, open loop, ``benchmarks/lost_echo_budget.py``) the
+#: mean set area with 600, 256, 128 and 64 boxes: 452, 489, 574 and 930 m², against 662
+#: from the hulls; fewer boxes make the next epochs cheaper.
+LOST_ECHO_PREDICTED_BOXES = 256
 
 #: The smallest SIVIA precision ``eps_m``, metres: finer boxes multiply beyond any memory
 #: (a millimetre is far below the sonar's error bounds).
@@ -316,7 +341,9 @@ class Refinement:
     groups`) and paves that; such an epoch costs at most twice the budget. An epoch whose own
     set is fine drops it, and so does one whose set the budget had to merge into
     ``KEPT_PER_BOX * max_boxes`` boxes (a set that large by nature, not for want of budget:
-    refining it would only double the cost). Held by the
+    refining it would only double the cost). A fine global set of a belt that may lose its
+    echoes is handed on too, as its report (:data:`LOST_ECHO_GLOBAL_EPS_M`), so that the
+    next epoch paves under the full budget. Held by the
     caller between epochs (:meth:`IntervalTracker.step`), never logged."""
 
     scan: SonarScan
@@ -478,6 +505,20 @@ class IntervalTracker:
         size_m = min(float(width[0]), float(width[1]), np.sqrt(area_m2), 2 * area_m2 / span_m)
         return max(s.eps_m, size_m / s.eps_cells)
 
+    def rejects_nothing(self, scan: SonarScan) -> bool:
+        """Whether the sonar can reject no pose on ``scan``: at most ``q_max`` of its readings
+        constrain (echoes, and no-echo readings when echoes are never lost), so every pose is
+        explained with at most ``q_max`` readings unexplained (only the in-room test remains)."""
+        return int(np.count_nonzero(scan.kind != IGNORED)) <= self.settings.q_max
+
+    def grown_boxes(self, previous: Subpaving, dt_s: float) -> np.ndarray:
+        """The prediction box by box: each box of ``previous`` (headings unwrapped near its
+        first box) grown by the limits over ``dt_s``, headings wrapped, coarsened to at most
+        :data:`LOST_ECHO_PREDICTED_BOXES` boxes (their union holds every grown box)."""
+        grown = wrap_headings(self.limits(_unwrapped(previous.outer), dt_s))
+        scale = pose_scale(self.settings.heading_scale_m_per_rad)
+        return coarsen(grown, LOST_ECHO_PREDICTED_BOXES, scale)
+
     def _hull_prediction(self, previous: Subpaving, dt_s: float) -> np.ndarray:
         """The hull of ``previous`` (headings unwrapped near its first box) grown by the
         limits over ``dt_s``, headings wrapped."""
@@ -531,6 +572,7 @@ class IntervalTracker:
         ``previous`` (its coarse, merged report)."""
         start = time.perf_counter()
         s = self.settings
+        lossy = not scan.belt.echoes_never_lost
         pending, apart = None, refinement is not None
         if refinement is not None and not refinement.paving.coarse:
             previous, dt_s = refinement.paving, refinement.age_s + dt_s
@@ -543,12 +585,21 @@ class IntervalTracker:
             else:
                 previous = None
         if previous is None or previous.is_empty:
-            found = self._search(scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL)
+            eps_m = max(s.eps_m, LOST_ECHO_GLOBAL_EPS_M) if lossy else s.eps_m
+            found = self._search(
+                scan, global_box(self.map_bounds), GLOBAL_SPLITS_PER_LEVEL, eps_m=eps_m
+            )
             status = EpochStatus.GLOBAL if found.consistent else EpochStatus.LOST
         else:
-            predicted = as_boxes(self.predict(previous, dt_s, apart))
+            # a refinement's chain keeps the full budget (it refines a set cut short for want
+            # of budget, e.g. a global search); other tracking epochs the smaller one
+            cheap = s.whole_boxes and refinement is None
             within = None
-            joined = not apart or s.whole_boxes  # overlapping boxes kept whole would overlap
+            if cheap and lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan):
+                predicted, joined = self.grown_boxes(previous, dt_s), False
+            else:
+                predicted = as_boxes(self.predict(previous, dt_s, apart))
+                joined = not apart or s.whole_boxes  # overlapping boxes kept whole would overlap
             if s.tracker == Tracker.SIVIA and joined and predicted.shape[0] > 1:
                 # paved from the whole hull, as for one component (the same bisections, so
                 # never a looser set), every box outside the components' predictions rejected
@@ -558,11 +609,8 @@ class IntervalTracker:
                     scale = pose_scale(s.heading_scale_m_per_rad)
                     within = coarsen(within, MAX_WITHIN_REGIONS, scale)
                 predicted = self._hull_prediction(previous, dt_s)
-            # a refinement's chain keeps the full budget (it refines a set cut short for want
-            # of budget, e.g. a global search); other tracking epochs the smaller one
-            cheap = s.whole_boxes and refinement is None
             tests = float(TESTS_PER_BOX)
-            if cheap and not scan.belt.echoes_never_lost:
+            if cheap and lossy:
                 tests = min(tests, LOST_ECHO_TRACKING_TESTS / s.max_boxes)
             elif cheap:
                 floor = min(float(TESTS_PER_BOX), TRACKING_MIN_TESTS / s.max_boxes)
@@ -609,5 +657,9 @@ class IntervalTracker:
                 merged = merged[held != OUTSIDE]
             inner, boundary, coarse = np.zeros((0, 3, 2)), merged, True
         paving = Subpaving(inner, boundary, coarse)
+        if lossy and status == EpochStatus.GLOBAL and not coarse:
+            # the report, the same union as the finer set in fewer boxes (a refinement of
+            # those would cost the next epoch's prediction more for the same poses)
+            pending = Refinement(scan, paving)
         elapsed_s = time.perf_counter() - start
         return EpochResult(paving, found.q, status, elapsed_s, coarse, pending)

@@ -232,8 +232,8 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
     lost, 6 random walks of 8 epochs from random poses 1.5 to 2.5 m from the south or the west
     wall, readings at their error bounds: every
     tracking search tests at most ``LOST_ECHO_TRACKING_TESTS`` boxes in SIVIA and as many again
-    in the retest of the boxes it left (up to 1177 here; with the 40 000 of a belt that never
-    loses its echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
+    in the retest of the boxes it left (with the 40 000 of a belt that never loses its
+    echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
     pose reachable from the previous true pose within the robot's limits that the exact cone
     model finds consistent with the scan (at most ``q_max`` readings unexplained), the truth
     among them, is in the set."""
@@ -289,3 +289,84 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
                 checked += len(poses)
             previous = result.paving
     assert coarse >= 10 and checked > 1000  # the budget bit, and the check is not vacuous
+
+
+def test_lost_echo_global_search_and_scans_without_constraint_keep_the_reachable_poses(
+    monkeypatch,
+):
+    """big_hall with half the echoes lost, 8 random poses 1.5 to 2.5 m from a wall, readings
+    at their error bounds: the global search paves at ``LOST_ECHO_GLOBAL_EPS_M`` (not
+    ``eps_m``), holds the truth and every consistent pose sampled near it, and hands its
+    report on as a refinement; then, on a scan left with at most ``q_max`` echoes (which
+    rejects no pose), the tracking epoch paves at most ``LOST_ECHO_PREDICTED_BOXES`` boxes,
+    and every pose reachable from the set within the robot's limits (sampled in its boxes)
+    that lies in the hall, the truth among them, is in its set."""
+    from intervals import tracker as tracker_module
+    from intervals.tracker import LOST_ECHO_GLOBAL_EPS_M, LOST_ECHO_PREDICTED_BOXES
+    from scenarios.spec import load_scenario
+
+    hall = load_scenario("big_hall").map
+    rng = np.random.default_rng(31)
+    belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=False)
+    searches: list[tuple[float, int]] = []  # (eps, initial boxes) of each search
+    real_gomne = tracker_module.gomne
+
+    def recorded_gomne(scan, initial, eps, *args, **kwargs):
+        searches.append((eps, np.asarray(initial).reshape(-1, 3, 2).shape[0]))
+        return real_gomne(scan, initial, eps, *args, **kwargs)
+
+    monkeypatch.setattr(tracker_module, "gomne", recorded_gomne)
+    settings = TrackerSettings(v_max_m_s=0.5, omega_max_rad_s=0.5)
+    reach = np.array([0.5, 0.5, 0.5])
+    tracker = IntervalTracker(settings, hall.bounds)
+    assert settings.eps_m < LOST_ECHO_GLOBAL_EPS_M  # else the first check is vacuous
+    checked = 0
+    for _ in range(8):
+        truth = np.array(
+            [rng.uniform(2.0, 58.0), rng.uniform(1.5, 2.5), rng.uniform(-np.pi, np.pi)]
+        )
+        if rng.random() < 0.5:
+            truth[:2] = truth[1::-1]
+        m = bounded_readings(cone_ranges(truth[None], hall.segments)[0], DEFAULT_BELT, rng)
+        m[rng.random(m.shape) < 0.5] = np.inf  # lost echoes
+        searches.clear()
+        found = tracker.step(None, SonarScan(hall.segments, belt, m, hall.boundary), 1.0)
+        assert found.status == "global" and searches[0][0] == LOST_ECHO_GLOBAL_EPS_M
+        poses = _consistent_poses(
+            SonarScan(hall.segments, belt, m, hall.boundary),
+            hall.segments,
+            truth,
+            np.array([0.3, 0.3, 0.1]),
+            1,
+            rng,
+            count=400,
+        )
+        assert found.paving.contains(np.concatenate([truth[None], poses])).all()
+        if not found.coarse:
+            assert found.refinement is not None
+            assert np.array_equal(found.refinement.paving.outer, found.paving.outer)
+        # a move within the limits, then a scan with one echo at most
+        last = truth
+        truth = last + rng.uniform(-0.9, 0.9, size=3) * reach
+        truth[2] = np.mod(truth[2] + np.pi, 2 * np.pi) - np.pi
+        m = bounded_readings(cone_ranges(truth[None], hall.segments)[0], DEFAULT_BELT, rng)
+        echoes = np.flatnonzero(np.isfinite(m))
+        m[echoes[1:]] = np.inf
+        scan = SonarScan(hall.segments, belt, m, hall.boundary)
+        assert tracker.rejects_nothing(scan)
+        searches.clear()
+        result = tracker.step(found.paving, scan, 1.0)
+        assert result.consistent and searches[0][1] <= LOST_ECHO_PREDICTED_BOXES
+        # poses reachable from the set: uniform in its boxes (by volume), then moved
+        boxes = found.paving.outer
+        widths = boxes[..., 1] - boxes[..., 0]
+        volumes = widths.prod(axis=1)
+        picked = boxes[rng.choice(len(boxes), size=800, p=volumes / volumes.sum())]
+        reachable = rng.uniform(picked[..., 0], picked[..., 1])
+        reachable += rng.uniform(-reach, reach, size=reachable.shape)
+        reachable[:, 2] = np.mod(reachable[:, 2] + np.pi, 2 * np.pi) - np.pi
+        inside = ((reachable[:, :2] > 0.5) & (reachable[:, :2] < 59.5)).all(axis=1)
+        reachable = np.concatenate([truth[None], reachable[inside]])
+        assert result.paving.contains(reachable).all()
+        checked += len(reachable)
+    assert checked > 8 * 400  # the check is not vacuous
