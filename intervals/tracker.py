@@ -456,15 +456,23 @@ class IntervalTracker:
         hulls = component_hulls(fine) if fine.shape[0] else fine
         return np.concatenate([hulls, boxes[wide]])
 
-    def predict(self, previous: Subpaving, dt_s: float, apart: bool = False) -> np.ndarray:
+    def predict(
+        self, previous: Subpaving, dt_s: float, apart: bool = False, each_box: bool = False
+    ) -> np.ndarray:
         """Boxes ``(N, 3, 2)`` holding every pose reachable from ``previous`` in ``dt_s``
-        (``apart``: see :meth:`groups`)."""
+        (``apart``: see :meth:`groups`). ``each_box`` (``sivia`` prediction): each box of
+        ``previous`` grown by the limits alone, coarsened to at most
+        :data:`LOST_ECHO_PREDICTED_BOXES` boxes (their union holds every grown box)."""
         if not (np.isfinite(dt_s) and dt_s >= 0):
             raise IntervalError(f"tracker: dt_s must be finite and >= 0, got {dt_s!r}")
         boxes = previous.outer
         boxes = _unwrapped(boxes)
         s = self.settings
         scale = pose_scale(s.heading_scale_m_per_rad)
+        if s.tracker == Tracker.SIVIA and each_box:
+            return coarsen(
+                wrap_headings(self.limits(boxes, dt_s)), LOST_ECHO_PREDICTED_BOXES, scale
+            )
         if s.tracker == Tracker.SIVIA:
             return wrap_headings(self.limits(self.groups(boxes, apart), dt_s))
         motion = self.motion if self.motion is not None else self.limits
@@ -510,14 +518,6 @@ class IntervalTracker:
         constrain (echoes, and no-echo readings when echoes are never lost), so every pose is
         explained with at most ``q_max`` readings unexplained (only the in-room test remains)."""
         return int(np.count_nonzero(scan.kind != IGNORED)) <= self.settings.q_max
-
-    def grown_boxes(self, previous: Subpaving, dt_s: float) -> np.ndarray:
-        """The prediction box by box: each box of ``previous`` (headings unwrapped near its
-        first box) grown by the limits over ``dt_s``, headings wrapped, coarsened to at most
-        :data:`LOST_ECHO_PREDICTED_BOXES` boxes (their union holds every grown box)."""
-        grown = wrap_headings(self.limits(_unwrapped(previous.outer), dt_s))
-        scale = pose_scale(self.settings.heading_scale_m_per_rad)
-        return coarsen(grown, LOST_ECHO_PREDICTED_BOXES, scale)
 
     def _hull_prediction(self, previous: Subpaving, dt_s: float) -> np.ndarray:
         """The hull of ``previous`` (headings unwrapped near its first box) grown by the
@@ -596,7 +596,7 @@ class IntervalTracker:
             cheap = s.whole_boxes and refinement is None
             within = None
             if cheap and lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan):
-                predicted, joined = self.grown_boxes(previous, dt_s), False
+                predicted, joined = self.predict(previous, dt_s, each_box=True), False
             else:
                 predicted = as_boxes(self.predict(previous, dt_s, apart))
                 joined = not apart or s.whole_boxes  # overlapping boxes kept whole would overlap
