@@ -359,8 +359,9 @@ class EpochResult:
     wrapped to ``[-pi, pi]``); ``q``: GOMNE's minimal number of outliers explaining the scan
     (None without a set; the set itself is relaxed by ``q_max`` when the settings are
     ``guaranteed``); ``status``: an :class:`EpochStatus`; ``elapsed_s``: wall time of the
-    epoch (timing, not a result); ``coarse``: the budget (``max_boxes``) cut the epoch's
-    paving short or merged its boxes: the set is a coarser sound cover; ``refinement``: for a
+    epoch (timing, not a result); ``coarse``: a budget cut the epoch's paving short or
+    merged its boxes (``max_boxes``, or a lost-echo belt's
+    :data:`LOST_ECHO_TRACKING_TESTS`): the set is a coarser sound cover; ``refinement``: for a
     coarse epoch, the finer set the next epoch continues from (:class:`Refinement`; pass it
     to the next :meth:`IntervalTracker.step`, and drop it from results kept afterwards).
     """
