@@ -8,9 +8,10 @@ summary, rerun recording to a temporary file) on each built-in scenario (default
 them, plus ``big_hall`` with ``lost_echo_prob = 0.5``), ``--duration`` simulated seconds
 each (default 60). A plan may be named as a variant of a built-in one, ``"PLAN[, lost_echo_prob
 P][, seed N]"`` (``"corridor, lost_echo_prob 0.5, seed 1"``: ``corridor`` with ``[sensors.sonar]
-lost_echo_prob = 0.5`` and ``[run] seed = 1``; ``_common.variant_parts``). Each run is a child process, so its peak memory is its own (the
-``ru_maxrss`` of ``os.wait4``); its address space is capped with ``RLIMIT_AS``
-(``--memory-gib``, default 4) so that a run asking for too much fails with a
+lost_echo_prob = 0.5`` and ``[run] seed = 1``; ``_common.variant_parts``). Each run is a
+child process, so its peak memory is its own (the ``ru_maxrss`` of ``os.wait4``); its address
+space is capped with ``RLIMIT_AS`` (``--memory-gib``, default 4) so that a run asking for too
+much fails with a
 ``MemoryError`` (reported ``memory > cap``, with the size asked and where) instead of
 exhausting the machine, and it is killed after ``--timeout`` wall seconds (reported
 ``timeout``). Before its plan, each child runs 3 s of ``hall`` untimed and records it, so
