@@ -1,4 +1,5 @@
-"""Helpers shared by the benchmark scripts: timing, the machine line, and ``BENCHMARKS.md`` sections.
+"""Helpers shared by the benchmark scripts: timing, the machine line, ``BENCHMARKS.md`` sections,
+and the scenarios of plan variants (``"big_hall, lost_echo_prob 0.5, seed 1"``).
 
 Benchmarks are run as scripts (``python benchmarks/NAME.py``), so this module is imported as
 ``_common`` from the script's own folder (Python puts it first on ``sys.path``).
@@ -13,14 +14,19 @@ import platform
 import subprocess
 import sys
 import time
+import tomllib
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scenarios.outputs import write_text
+
+if TYPE_CHECKING:
+    from scenarios.spec import ScenarioSpec
 
 BENCHMARKS_MD = Path(__file__).resolve().parent.parent / "BENCHMARKS.md"
 """The results file at the repository root."""
@@ -204,3 +210,60 @@ def record_calls(module: ModuleType, name: str) -> list[tuple]:
 
     setattr(module, name, recording)
     return calls
+
+
+#: What a variant name may set on a built-in plan: its word -> (the scenario table holding the
+#: key of that name, the value's type).
+VARIANT_KEYS: dict[str, tuple[tuple[str, ...], Callable[[str], float]]] = {
+    "lost_echo_prob": (("sensors", "sonar"), float),
+    "seed": (("run",), int),
+}
+
+
+def variant_parts(name: str) -> tuple[str, dict[str, float]]:
+    """``(plan, {word: value})`` of a plan variant's name ``PLAN[, WORD VALUE]...``, each WORD
+    one of :data:`VARIANT_KEYS` (``"hall, lost_echo_prob 0.2, seed 1"``: ``hall`` with
+    ``[sensors.sonar] lost_echo_prob = 0.2`` and ``[run] seed = 1``); a plan's own name has no
+    settings.
+
+    Raises:
+        ValueError: a part that is not ``WORD VALUE`` with a known word and a value of its
+            type, or a word given twice.
+    """
+    plan, *parts = (part.strip() for part in name.split(","))
+    settings: dict[str, float] = {}
+    for part in parts:
+        word, _, value = part.partition(" ")
+        if word not in VARIANT_KEYS:
+            raise ValueError(
+                f"{name!r}: {part!r} is not WORD VALUE, WORD one of {', '.join(VARIANT_KEYS)}"
+            )
+        if word in settings:
+            raise ValueError(f"{name!r}: {word} given twice")
+        kind = VARIANT_KEYS[word][1]
+        try:
+            settings[word] = kind(value.strip())
+        except ValueError:
+            raise ValueError(
+                f"{name!r}: {value.strip()!r} is not {kind.__name__} ({word})"
+            ) from None
+    return plan, settings
+
+
+def load_variant(name: str, folder: Path) -> ScenarioSpec:
+    """The scenario of a plan variant (:func:`variant_parts`): the plan's file ``folder /
+    PLAN.toml`` with the variant's keys set in its tables, validated as ``robotsim run`` does
+    a file (so that a belt that may lose echoes gets ``free_space = false``, as in its file)."""
+    from scenarios.feasibility import check_feasible
+    from scenarios.spec import scenario_from_tables
+
+    plan, settings = variant_parts(name)
+    path = folder / f"{plan}.toml"
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    for word, value in settings.items():
+        table = data
+        for key in VARIANT_KEYS[word][0]:
+            table = table.setdefault(key, {})
+        table[word] = value
+    spec = scenario_from_tables(data, source=str(path), base_dir=path.parent, name=plan)
+    return check_feasible(spec)

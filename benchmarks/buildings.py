@@ -6,9 +6,12 @@
 Runs what ``robotsim run`` runs (simulation, dead reckoning, interval epochs, fusion,
 summary, rerun recording to a temporary file) on each built-in scenario (default: all of
 them, plus ``big_hall`` with ``lost_echo_prob = 0.5``), ``--duration`` simulated seconds
-each (default 60). Each run is a child process, so its peak memory is its own (the
-``ru_maxrss`` of ``os.wait4``); its address space is capped with ``RLIMIT_AS``
-(``--memory-gib``, default 4) so that a run asking for too much fails with a
+each (default 60). A plan may be named as a variant of a built-in one, ``"PLAN[, lost_echo_prob
+P][, seed N]"`` (``"corridor, lost_echo_prob 0.5, seed 1"``: ``corridor`` with ``[sensors.sonar]
+lost_echo_prob = 0.5`` and ``[run] seed = 1``; ``_common.variant_parts``). Each run is a
+child process, so its peak memory is its own (the ``ru_maxrss`` of ``os.wait4``); its address
+space is capped with ``RLIMIT_AS`` (``--memory-gib``, default 4) so that a run asking for too
+much fails with a
 ``MemoryError`` (reported ``memory > cap``, with the size asked and where) instead of
 exhausting the machine, and it is killed after ``--timeout`` wall seconds (reported
 ``timeout``). Before its plan, each child runs 3 s of ``hall`` untimed and records it, so
@@ -52,17 +55,17 @@ import numpy as np
 from _common import (
     add_set_argument,
     code_label,
+    load_variant,
     machine_line,
     markdown_table,
     parsed_settings,
     settings_arguments,
+    variant_parts,
     write_section,
 )
 
-#: Variants benchmarked besides the built-in scenarios: name -> (scenario, TOML appended).
-VARIANTS = {
-    "big_hall, lost_echo_prob 0.5": ("big_hall", "[sensors.sonar]\nlost_echo_prob = 0.5\n"),
-}
+#: Variants benchmarked by default besides the built-in scenarios (``_common.variant_parts``).
+VARIANTS = ("big_hall, lost_echo_prob 0.5",)
 
 #: The source tree this script belongs to, and its built-in scenario files.
 REPOSITORY = Path(__file__).resolve().parent.parent
@@ -101,19 +104,16 @@ class ProgressFile:
 
 
 def child(name: str, duration_s: float, out: Path, changes: dict | None = None) -> int:
-    """Run one plan (a built-in name or a :data:`VARIANTS` key); write its figures to ``out``.
-    ``changes``: keys of ``[estimation]`` replaced in the plan's scenario (``--set``)."""
+    """Run one plan (a built-in name or a variant, ``_common.load_variant``); write its figures
+    to ``out``. ``changes``: keys of ``[estimation]`` replaced in the plan's scenario (``--set``)."""
     from scenarios.epochs import GLOBAL, TRACKING
     from scenarios.recording import write_recording
     from scenarios.runner import run_scenario
-    from scenarios.spec import load_scenario, parse_scenario
+    from scenarios.spec import load_scenario
 
     # the scenario files of this checkout, so that another code tree (--compare) runs them too
-    base, extra = VARIANTS.get(name, (name, ""))
-    path = SCENARIO_FOLDER / f"{base}.toml"
-    text = path.read_text(encoding="utf-8") + "\n" + extra
-    spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
-    spec = spec.with_run(duration_s=duration_s).with_estimation(**(changes or {}))
+    spec = load_variant(name, SCENARIO_FOLDER).with_run(duration_s=duration_s)
+    spec = spec.with_estimation(**(changes or {}))
     try:
         # warm-up, not timed: loads the compiled kernels (numba's cache) and the lazy imports,
         # which would otherwise land in the first epoch, the global localisation, and in the
@@ -344,11 +344,14 @@ def main(argv: list[str] | None = None) -> int:
         for name in builtin_names()
         if load_scenario(name).estimation.estimator == Estimator.INTERVALS
     ]
-    known = (*interval_plans, *VARIANTS)
-    plans = args.plans or list(known)
-    unknown = [plan for plan in plans if plan not in known]
-    if unknown:
-        parser.error(f"unknown plan {unknown[0]!r}; choose from {', '.join(known)}")
+    plans = args.plans or [*interval_plans, *VARIANTS]
+    for plan in plans:
+        try:
+            base = variant_parts(plan)[0]
+        except ValueError as error:
+            parser.error(str(error))
+        if base not in interval_plans:
+            parser.error(f"unknown plan {base!r}; choose from {', '.join(interval_plans)}")
     if not (args.duration > 0 and args.timeout > 0 and args.memory_gib > 0):
         parser.error("--duration, --timeout and --memory-gib must be > 0")
     trees = [REPOSITORY]

@@ -4,12 +4,13 @@
 
 For each budget (SIVIA tests of a tracking epoch, default 40000 4000 2000 1000 800 600 500)
 one child process sets :data:`intervals.tracker.LOST_ECHO_TRACKING_TESTS` to it and steps the
-tracker on ``--plan`` (default ``big_hall, lost_echo_prob 0.5``, a ``benchmarks/buildings.py``
-variant) as ``benchmarks/tracking_epochs.py`` does (:func:`tracking_epochs.child`: each epoch
-run ``--repeat`` times, its best process CPU time kept). Reported per budget: the tracking
-epochs' CPU mean / median / p95 / max, the mean (x, y) set area, the sets holding the truth,
-the coarse epochs and the sets' digest. 40 000 is the budget of a belt that never loses its
-echoes at the default ``max_boxes`` (:data:`intervals.tracker.TRACKING_MIN_TESTS`).
+tracker on ``--plan`` (default ``big_hall, lost_echo_prob 0.5``; any built-in plan or variant
+``"PLAN[, lost_echo_prob P][, seed N]"``, as in ``benchmarks/buildings.py``) as
+``benchmarks/tracking_epochs.py`` does (:func:`tracking_epochs.child`: each epoch run
+``--repeat`` times, its best process CPU time kept). Reported per budget: the tracking epochs'
+CPU mean / median / p95 / max, the mean (x, y) set area, the sets holding the truth, the coarse
+epochs and the sets' digest. 40 000 is the budget of a belt that never loses its echoes at the
+default ``max_boxes`` (:data:`intervals.tracker.TRACKING_MIN_TESTS`).
 """
 
 from __future__ import annotations

@@ -12,6 +12,8 @@ time of a few-millisecond epoch mostly measures the other jobs (``benchmarks/bui
 reports wall time, for the whole pipeline). Reported per plan: the tracking epochs' median,
 95th percentile and largest CPU time, the mean (x, y) area of the sets, how many sets hold
 the true pose, and a digest of every epoch's set (equal digests: the same boxes).
+A plan may be a variant of a built-in one, ``"PLAN[, lost_echo_prob P][, seed N]"``
+(``"hall, lost_echo_prob 0.5, seed 2"``), as in ``benchmarks/buildings.py``.
 
 ``--set KEY=VALUE`` (repeatable) replaces a key of the scenarios' ``[estimation]`` table in
 every run (the value read as JSON: ``--set tighten_levels=6``), for both trees.
@@ -37,6 +39,7 @@ import numpy as np
 from _common import (
     add_set_argument,
     code_label,
+    load_variant,
     machine_and_load,
     markdown_table,
     parsed_settings,
@@ -54,16 +57,10 @@ def child(plan: str, duration_s: float, repeat: int, out: Path, changes: dict | 
     from intervals.sonar.scan import SonarBelt, SonarScene
     from intervals.tracker import IntervalTracker
     from scenarios.runner import simulate_spec
-    from scenarios.spec import parse_scenario
 
     def load(name: str, seconds: float):
-        from buildings import VARIANTS  # a variant: a built-in plan with settings appended
-
-        base, extra = VARIANTS.get(name, (name, ""))
-        path = SCENARIO_FOLDER / f"{base}.toml"
-        text = path.read_text(encoding="utf-8") + "\n" + extra
-        spec = parse_scenario(text, source=str(path), base_dir=path.parent, name=base)
-        return spec.with_run(duration_s=seconds).with_estimation(**(changes or {}))
+        spec = load_variant(name, SCENARIO_FOLDER).with_run(duration_s=seconds)
+        return spec.with_estimation(**(changes or {}))
 
     def epochs(spec, rounds: int):
         est = spec.estimation
