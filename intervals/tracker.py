@@ -594,9 +594,12 @@ class IntervalTracker:
         else:
             # a refinement's chain keeps the full budget (it refines a set cut short for want
             # of budget, e.g. a global search); other tracking epochs the smaller one
-            cheap = s.whole_boxes and refinement is None
+            # (a lossy belt's scan that can reject no pose: the prediction itself, cheaply, even
+            # in a refinement's chain: no budget can split what the sonar does not constrain)
+            blind = lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan)
+            cheap = s.whole_boxes and (refinement is None or blind)
             within = None
-            if cheap and lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan):
+            if cheap and blind:
                 predicted, joined = self.predict(previous, dt_s, each_box=True), False
             else:
                 predicted = as_boxes(self.predict(previous, dt_s, apart))
@@ -635,7 +638,9 @@ class IntervalTracker:
             pending = None  # a fine set, reported whole: an older refinement is done with
         elif found.merged:
             pending = None  # a set the budget had to merge is too large to refine: none
-        elif s.whole_boxes and status == EpochStatus.TRACKING and coarse and refinement is None:
+        elif s.whole_boxes and status == EpochStatus.TRACKING and (
+            lossy or (coarse and refinement is None)
+        ):
             # a tracking set the budget cut short is large by nature (its prediction holds it,
             # as the parts the scan cannot split are kept whole): refining it on its scan next
             # epoch would double that epoch's cost for a set the next scan paves anyway
