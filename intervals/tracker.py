@@ -343,7 +343,9 @@ class Refinement:
     ``KEPT_PER_BOX * max_boxes`` boxes (a set that large by nature, not for want of budget:
     refining it would only double the cost). A fine global set of a belt that may lose its
     echoes is handed on too, as its report (:data:`LOST_ECHO_GLOBAL_EPS_M`), so that the
-    next epoch paves under the full budget. Held by the
+    next epoch paves under the full budget; it is the only refinement of such a belt, whose
+    tracking epochs hand none on, and whose epochs on a scan that rejects no pose
+    (:meth:`IntervalTracker.rejects_nothing`) predict cheaply even when given one. Held by the
     caller between epochs (:meth:`IntervalTracker.step`), never logged."""
 
     scan: SonarScan
@@ -594,9 +596,12 @@ class IntervalTracker:
         else:
             # a refinement's chain keeps the full budget (it refines a set cut short for want
             # of budget, e.g. a global search); other tracking epochs the smaller one
-            cheap = s.whole_boxes and refinement is None
+            # (a lossy belt's scan that can reject no pose: the prediction itself, cheaply, even
+            # in a refinement's chain: no budget can split what the sonar does not constrain)
+            blind = lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan)
+            cheap = s.whole_boxes and (refinement is None or blind)
             within = None
-            if cheap and lossy and s.tracker == Tracker.SIVIA and self.rejects_nothing(scan):
+            if cheap and blind:
                 predicted, joined = self.predict(previous, dt_s, each_box=True), False
             else:
                 predicted = as_boxes(self.predict(previous, dt_s, apart))
@@ -635,10 +640,18 @@ class IntervalTracker:
             pending = None  # a fine set, reported whole: an older refinement is done with
         elif found.merged:
             pending = None  # a set the budget had to merge is too large to refine: none
-        elif s.whole_boxes and status == EpochStatus.TRACKING and coarse and refinement is None:
+        elif (
+            s.whole_boxes
+            and status == EpochStatus.TRACKING
+            and (lossy or (coarse and refinement is None))
+        ):
             # a tracking set the budget cut short is large by nature (its prediction holds it,
             # as the parts the scan cannot split are kept whole): refining it on its scan next
-            # epoch would double that epoch's cost for a set the next scan paves anyway
+            # epoch would double that epoch's cost for a set the next scan paves anyway. A
+            # lossy belt's tracking sets never are: on big_hall with half its echoes lost
+            # (seeds 1, 2) chains of them, fine sets of 10 000 to 30 000 boxes growing under
+            # two or three echoes, then cut short, cost 50 to 960 ms an epoch for 8 epochs
+            # (BENCHMARKS.md, "Lost echoes: the slow epochs were a refinement's chain")
             pending = None
         elif pending is None or not coarse:
             # kept for the next epoch: this set, finer than the report merged to max_boxes

@@ -230,7 +230,9 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
 ):
     """big_hall (60 x 60 m, the sonar's 3 m out of reach of most of it) with half the echoes
     lost, 6 random walks of 8 epochs from random poses 1.5 to 2.5 m from the south or the west
-    wall, readings at their error bounds: every
+    wall, readings at their error bounds, each epoch handed the previous one's refinement as
+    the pipeline does: no tracking epoch hands one on (the global search's, continued by the
+    first tracking epoch under the full budget, is the only one); every later
     tracking search tests at most ``LOST_ECHO_TRACKING_TESTS`` boxes in SIVIA and as many again
     in the retest of the boxes it left (with the 40 000 of a belt that never loses its
     echoes, tens of thousands), an epoch whose search was cut short is reported coarse, and every
@@ -266,7 +268,7 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
         )
         if rng.random() < 0.5:
             truth[:2] = truth[1::-1]
-        previous = None
+        previous, refinement = None, None
         for _ in range(8):
             last = truth
             if previous is not None:  # a move within the limits, inside the hall
@@ -277,17 +279,19 @@ def test_lost_echo_tracking_epochs_stay_within_their_budget_and_keep_the_reachab
             m[rng.random(m.shape) < 0.5] = np.inf  # lost echoes
             scan = SonarScan(hall.segments, belt, m, hall.boundary)
             searches.clear()
-            result = tracker.step(previous, scan, 1.0)
+            result = tracker.step(previous, scan, 1.0, refinement)
             assert result.consistent and result.paving.contains(truth[None])[0]
             if previous is not None:
-                assert all(tests <= 2 * LOST_ECHO_TRACKING_TESTS for tests, _ in searches)
+                assert result.status == "tracking" and result.refinement is None
+                if refinement is None:
+                    assert all(tests <= 2 * LOST_ECHO_TRACKING_TESTS for tests, _ in searches)
                 assert result.coarse or not searches[-1][1]
                 coarse += result.coarse
                 poses = _consistent_poses(scan, hall.segments, last, reach, 1, rng, count=400)
                 poses = poses[(poses[:, :2] > 0.5).all(axis=1) & (poses[:, :2] < 59.5).all(axis=1)]
                 assert result.paving.contains(poses).all()
                 checked += len(poses)
-            previous = result.paving
+            previous, refinement = result.paving, result.refinement
     assert coarse >= 10 and checked > 1000  # the budget bit, and the check is not vacuous
 
 
@@ -298,16 +302,24 @@ def test_lost_echo_global_search_and_scans_without_constraint_keep_the_reachable
     at their error bounds: the global search paves at ``LOST_ECHO_GLOBAL_EPS_M`` (not
     ``eps_m``), holds the truth and every consistent pose sampled near it, and hands its
     report on as a refinement; then, on a scan left with at most ``q_max`` echoes (which
-    rejects no pose), the tracking epoch paves at most ``LOST_ECHO_PREDICTED_BOXES`` boxes,
-    and every pose reachable from the set within the robot's limits (sampled in its boxes)
-    that lies in the hall, the truth among them, is in its set."""
+    rejects no pose), the tracking epoch handed that refinement paves at most
+    ``LOST_ECHO_PREDICTED_BOXES`` boxes, tests at most ``LOST_ECHO_TRACKING_TESTS`` boxes and
+    as many again in its retest (not the full budget of a refinement's chain: no budget splits
+    what the sonar does not constrain), hands no refinement on, and every pose reachable from
+    the set within the robot's limits (sampled in its boxes) that lies in the hall, the truth
+    among them, is in its set."""
     from intervals import tracker as tracker_module
-    from intervals.tracker import LOST_ECHO_GLOBAL_EPS_M, LOST_ECHO_PREDICTED_BOXES
+    from intervals.tracker import (
+        LOST_ECHO_GLOBAL_EPS_M,
+        LOST_ECHO_PREDICTED_BOXES,
+        LOST_ECHO_TRACKING_TESTS,
+    )
     from scenarios.spec import load_scenario
 
     hall = load_scenario("big_hall").map
     rng = np.random.default_rng(31)
     belt = SonarBelt.from_params(DEFAULT_BELT, echoes_never_lost=False)
+    counting = _CountingTest(monkeypatch)
     searches: list[tuple[float, int]] = []  # (eps, initial boxes) of each search
     real_gomne = tracker_module.gomne
 
@@ -355,8 +367,11 @@ def test_lost_echo_global_search_and_scans_without_constraint_keep_the_reachable
         scan = SonarScan(hall.segments, belt, m, hall.boundary)
         assert tracker.rejects_nothing(scan)
         searches.clear()
-        result = tracker.step(found.paving, scan, 1.0)
+        counting.calls.clear()
+        result = tracker.step(found.paving, scan, 1.0, found.refinement)
         assert result.consistent and searches[0][1] <= LOST_ECHO_PREDICTED_BOXES
+        assert sum(counting.calls) <= 2 * LOST_ECHO_TRACKING_TESTS
+        assert result.refinement is None
         # poses reachable from the set: uniform in its boxes (by volume), then moved
         boxes = found.paving.outer
         widths = boxes[..., 1] - boxes[..., 0]
