@@ -433,10 +433,23 @@ class IntervalTracker:
 
     def limits(self, boxes: np.ndarray, dt_s: float) -> np.ndarray:
         """Boxes grown by the physical limits: ``v_max dt`` in x and y, ``omega_max dt`` in
-        heading (every pose reachable in ``dt_s`` from a pose of the box)."""
+        heading (every pose reachable in ``dt_s`` from a pose of the box), then cut to the map
+        bounds in x and y (:meth:`in_bounds`)."""
         s = self.settings
         reach = s.v_max_m_s * dt_s
-        return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
+        return self.in_bounds(inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s]))
+
+    def in_bounds(self, boxes: np.ndarray) -> np.ndarray:
+        """``boxes (N, 3, 2)`` cut to the map bounds in x and y, those left empty dropped: the
+        robot is inside the outer wall, so every pose a set must hold lies in the bounds (the
+        global search's premise). Without it a set the sonar cannot constrain grows by the
+        limits every epoch past the walls: big_hall with half its echoes lost, 600 s, a set of
+        25 000 m² in a 3600 m² hall."""
+        lo = np.maximum(boxes[:, :2, 0], self.map_bounds[:, 0])
+        hi = np.minimum(boxes[:, :2, 1], self.map_bounds[:, 1])
+        cut = boxes.copy()
+        cut[:, :2, 0], cut[:, :2, 1] = lo, hi
+        return cut[(lo <= hi).all(axis=1)]
 
     def groups(self, boxes: np.ndarray, apart: bool = False) -> np.ndarray:
         """Boxes ``(M, 3, 2)`` whose union holds ``boxes (N, 3, 2)`` (headings unwrapped near
@@ -473,9 +486,8 @@ class IntervalTracker:
         s = self.settings
         scale = pose_scale(s.heading_scale_m_per_rad)
         if s.tracker == Tracker.SIVIA and each_box:
-            return coarsen(
-                wrap_headings(self.limits(boxes, dt_s)), LOST_ECHO_PREDICTED_BOXES, scale
-            )
+            grown = wrap_headings(self.limits(boxes, dt_s))
+            return self.in_bounds(coarsen(grown, LOST_ECHO_PREDICTED_BOXES, scale))
         if s.tracker == Tracker.SIVIA:
             return wrap_headings(self.limits(self.groups(boxes, apart), dt_s))
         motion = self.motion if self.motion is not None else self.limits
@@ -490,7 +502,7 @@ class IntervalTracker:
             )
         except IntervalError:  # more cells than the budget: the image of the groups' hulls
             cells = motion(self.groups(boxes, apart), dt_s)
-        return wrap_headings(cells)
+        return wrap_headings(self.in_bounds(cells))
 
     def epoch_eps(self, previous: Subpaving) -> float:
         """The precision of a tracking epoch from ``previous`` (and of its paving again when
@@ -663,7 +675,7 @@ class IntervalTracker:
         if inner.shape[0] + boundary.shape[0] > s.max_boxes:
             scale = pose_scale(s.heading_scale_m_per_rad)
             merged = coarsen(np.concatenate([inner, boundary]), s.max_boxes // 2, scale)
-            merged = wrap_headings(merged)
+            merged = self.in_bounds(wrap_headings(merged))
             # the merged cells tested once: those the sonar or the room reject hold no pose
             # of the set (box_test, at the set's relaxation), the rest is the report
             held = box_test(merged, scan.restricted_to(merged), found.q_set, False)

@@ -1,12 +1,13 @@
 """The interval tracker on a synthetic circuit in ``hall``: containment, kidnapping, outliers,
-and what an epoch reports (boxes, inner mask, components, hull, status)."""
+what an epoch reports (boxes, inner mask, components, hull, status), and predictions cut to
+the map bounds."""
 
 import re
 
 import numpy as np
 import pytest
 
-from intervals.boxes import unwrap_headings
+from intervals.boxes import Subpaving, unwrap_headings
 from intervals.errors import IntervalError
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
@@ -143,3 +144,52 @@ def test_heading_unwrap_and_settings_errors():
     assert TrackerSettings(0.5, 0.5).q_max == 1  # the scenario files' documented default
     with pytest.raises(IntervalError, match="map bounds"):
         IntervalTracker(TrackerSettings(0.5, 0.5), np.zeros((2, 2)))
+
+
+def test_predictions_are_cut_to_the_map_bounds_and_keep_every_pose_in_them():
+    """200 random boxes across and beyond ``hall``'s bounds: ``in_bounds`` keeps inside the
+    bounds every box it returns, drops those wholly outside, and holds every pose of the
+    input boxes that lies in the bounds (sampled: 20 per box)."""
+    rng = np.random.default_rng(34)
+    tracker = _tracker(Tracker.SIVIA)
+    bounds = tracker.map_bounds
+    centre = rng.uniform(bounds[:, 0] - 4.0, bounds[:, 1] + 4.0, size=(200, 2))
+    half = rng.uniform(0.1, 3.0, size=(200, 2))
+    boxes = np.zeros((200, 3, 2))
+    boxes[:, :2, 0], boxes[:, :2, 1] = centre - half, centre + half
+    boxes[:, 2] = [-0.5, 0.5]
+    cut = tracker.in_bounds(boxes)
+    assert (cut[:, :2, 0] >= bounds[:, 0]).all() and (cut[:, :2, 1] <= bounds[:, 1]).all()
+    outside = ((boxes[:, :2, 1] < bounds[:, 0]) | (boxes[:, :2, 0] > bounds[:, 1])).any(axis=1)
+    assert outside.sum() > 0 and cut.shape[0] == 200 - outside.sum()
+    poses = rng.uniform(boxes[..., 0], boxes[..., 1], size=(20, 200, 3)).reshape(-1, 3)
+    poses = poses[((poses[:, :2] >= bounds[:, 0]) & (poses[:, :2] <= bounds[:, 1])).all(axis=1)]
+    lo, hi = cut[None, :, :, 0], cut[None, :, :, 1]
+    held = ((poses[:, None] >= lo) & (poses[:, None] <= hi)).all(axis=2).any(axis=1)
+    assert poses.shape[0] > 1000 and held.all()
+
+
+def test_a_set_the_sonar_cannot_constrain_stays_inside_the_map():
+    """A belt that loses every echo (each scan rejects no pose) over 40 epochs of 1 s from a
+    small set near a corner of ``hall``: every set lies within the map bounds, and holds every
+    pose reachable from the start within the robot's limits that lies in them (sampled);
+    before the cut the set grew by ``v_max dt`` a side every epoch, past the walls."""
+    rng = np.random.default_rng(35)
+    tracker = _tracker(Tracker.SIVIA)
+    bounds = tracker.map_bounds
+    belt = SonarBelt.from_params(PARAMS, echoes_never_lost=False)
+    start = np.array([bounds[0, 0] + 1.0, bounds[1, 0] + 1.0, 0.3])
+    box = np.stack([start - [0.05, 0.05, 0.05], start + [0.05, 0.05, 0.05]], axis=1)
+    blind = SonarScan(HALL.segments, belt, np.full(PARAMS.count, np.inf), HALL.boundary)
+    assert tracker.rejects_nothing(blind)
+    previous = Subpaving(np.zeros((0, 3, 2)), box[None], False)
+    for epoch in range(1, 41):
+        result = tracker.step(previous, blind, 1.0)
+        outer = result.outer
+        assert (outer[:, :2, 0] >= bounds[:, 0]).all() and (outer[:, :2, 1] <= bounds[:, 1]).all()
+        reach = np.array([0.5, 0.5, 0.5]) * epoch
+        poses = rng.uniform(start - reach, start + reach, size=(300, 3))
+        poses = poses[((poses[:, :2] >= bounds[:, 0]) & (poses[:, :2] <= bounds[:, 1])).all(axis=1)]
+        poses[:, 2] = np.mod(poses[:, 2] + np.pi, 2 * np.pi) - np.pi
+        assert result.paving.contains(poses).all()
+        previous = result.paving
