@@ -72,8 +72,9 @@ next call would remove less still. On ``corridor``, ``office_floor``, ``hall`` a
 every call removes a third to four fifths of the volume it refines (median over the tracking
 epochs at 9 levels and 4000 pieces), on ``big_hall`` (sets large by nature) the first call 15 %
 and the second 6 %: the rule ends its pass after the first, for the same median ratio (2.9 to 3.0)
-at 75 % of the pass's time, and leaves the other plans' sets as they were but a few of
-``symmetric``'s epochs (BENCHMARKS.md, "The tightening's cost against the ratio").
+in epochs 1 to 2 ms cheaper (7.7-8.6 to 6.2-6.9 ms CPU), and leaves the other plans' sets as they
+were but a few of ``symmetric``'s epochs (BENCHMARKS.md, "The tightening's cost against the
+ratio").
 
 When ``max_boxes`` leaves no room to refine every box ``splits`` times, a call makes fewer
 bisections (down to one), so that more of the boxes are refined: on ``office_floor`` (six to
@@ -122,9 +123,10 @@ median tightness ratios at 12 levels on ``corridor``, ``office_floor`` and ``sym
 MIN_REMOVED_SHARE = 0.2
 """The pipeline's ``min_removed`` of :func:`tighten`: the pass ends after a call that removed less
 than this share of the volume of the boxes it refined. Of 0.1, 0.2 and 0.3 (9 levels, 4000
-pieces), 0.1 changed nearly nothing; 0.2 and 0.3 the same sets (``big_hall`` and ``symmetric``;
-the pass 7.7-8.6 to 6.2-6.7 ms an epoch on ``big_hall``, 90 to 100x real time in the closed loop;
-BENCHMARKS.md, "The tightening's cost against the ratio")."""
+pieces; ``big_hall``, ``corridor``, ``office_floor``, ``hall``, ``symmetric``), 0.1 changed
+nearly nothing, 0.2 and 0.3 the sets of ``big_hall`` and ``symmetric`` only, alike
+(``big_hall``'s epoch 7.7-8.6 to 6.2-6.7 ms CPU, about 90 to 100x real time in the closed loop
+on a quiet machine; BENCHMARKS.md, "The tightening's cost against the ratio")."""
 
 SPLITS_PER_CALL = 3
 """Bisections between two test calls: one per pose axis, about, so each call sees up to 8
