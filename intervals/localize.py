@@ -34,7 +34,7 @@ from intervals.sonar.cone import sensor_verdicts
 from intervals.sonar.pieces import piece_rejections
 from intervals.sonar.room import room_verdicts
 from intervals.sonar.scan import SonarBelt, SonarScan
-from intervals.tighten import HEADING_CUT_WEIGHT, MAX_LEVELS, tighten
+from intervals.tighten import HEADING_CUT_WEIGHT, MAX_LEVELS, MIN_REMOVED_SHARE, tighten
 
 MIN_LEVEL_BOXES = 128
 """SIVIA levels of fewer boxes are bisected more (see :func:`intervals.sivia.sivia`)."""
@@ -275,7 +275,8 @@ def _pave(
     more than in SIVIA), and within ``tighten_max_tested`` minus
     :data:`SIVIA_TEST_PIECES` times SIVIA's box tests of this call, floored at 0 (None: no
     limit of its own; a SIVIA that tested many boxes leaves a coarser, still sound,
-    tightening), before any shaving.
+    tightening), ending after a call that removed less than
+    :data:`intervals.tighten.MIN_REMOVED_SHARE` of the volume it refined, before any shaving.
     """
     stored, counts, tested = [], [], [0]
     walls = idle.scan_walls(local) if whole else None
@@ -397,6 +398,7 @@ def _pave(
                 max_boxes=max_boxes,
                 max_tested=left,
                 idle=still,
+                min_removed=MIN_REMOVED_SHARE,
             )
             tested[0] += seen
             paving = Subpaving(paving.inner, boundary, coarse=paving.coarse)

@@ -19,7 +19,7 @@ from intervals.boxes import bisect, contains_points, volume
 from intervals.errors import IntervalError
 from intervals.localize import gomne, localize
 from intervals.sonar.scan import SonarBelt, SonarScan
-from intervals.tighten import MAX_LEVELS, _clamped, _pieces, tighten
+from intervals.tighten import MAX_LEVELS, MIN_REMOVED_SHARE, _clamped, _pieces, tighten
 from intervals.tracker import IntervalTracker, TrackerSettings
 from tests.helpers import (
     BIG_HALL_SEGMENTS,
@@ -372,13 +372,9 @@ def _block_and_sheet(boxes, parents=None):
     return cube | sheet, np.zeros(boxes.shape[0], dtype=np.int64), None
 
 
-def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
-    """The cube's eight cells (inside the set: a cut removes nothing) are larger than the
-    sheet's cells, and after one call their pieces are still the largest boxes. With tests
-    left for 64 boxes in the second call (as many as the cube's pieces), the pass refines
-    sheet pieces, not the cube's: the set ends smaller than after the first call (refining
-    the largest boxes would leave it as large), the cube's 64 pieces come back as they were,
-    every sampled point of the set stays covered, and the same inputs give the same set."""
+def _cube_and_sheet_cells():
+    """``(cube (8, 3, 2), sheet (K, 3, 2))``: the cube's eight cells (inside the set of
+    :func:`_block_and_sheet`) and the sheet's cells the test keeps."""
     cube = np.array(
         [
             [[x, x + 0.5], [y, y + 0.5], [z, z + 0.5]]
@@ -392,7 +388,17 @@ def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
             for (x0, x1), y, (z0, z1) in itertools.product(edges, edges, edges[:5])
         ]
     )
-    cells = np.concatenate([cube, sheet[_block_and_sheet(sheet)[0]]])
+    return cube, sheet[_block_and_sheet(sheet)[0]]
+
+
+def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
+    """The cube's eight cells (inside the set: a cut removes nothing) are larger than the
+    sheet's cells, and after one call their pieces are still the largest boxes. With tests
+    left for 64 boxes in the second call (as many as the cube's pieces), the pass refines
+    sheet pieces, not the cube's: the set ends smaller than after the first call (refining
+    the largest boxes would leave it as large), the cube's 64 pieces come back as they were,
+    every sampled point of the set stays covered, and the same inputs give the same set."""
+    cells = np.concatenate(_cube_and_sheet_cells())
     counts = np.zeros(cells.shape[0], dtype=np.int64)
     budget = 8 * cells.shape[0] + 8 * 64
     out, _, tested = tighten(cells, counts, _block_and_sheet, None, None, 6, max_tested=budget)
@@ -414,6 +420,82 @@ def test_a_budget_goes_to_the_boxes_whose_cuts_remove_volume():
     assert contains_points(out, points).any(axis=0).all()
     again, _, _ = tighten(cells, counts, _block_and_sheet, None, None, 6, max_tested=budget)
     assert np.array_equal(again, out)
+
+
+def test_the_pass_ends_after_a_call_that_removes_little():
+    """``min_removed``: a cut of the cube's cells (inside the set) removes nothing, so with
+    the rule their pass ends after its first call (8 pieces a cell tested, against 8 + 64
+    without it) and keeps the cube whole; each call on the sheet's cells removes more than
+    the share, so there the rule leaves the pass as it is (the same set, bit for bit); on both
+    the pass ends after the first call that removed less than the share of all it refined (the
+    second). Every sampled point of the set stays covered."""
+    cube, sheet = _cube_and_sheet_cells()
+    zeros = np.zeros(cube.shape[0], dtype=np.int64)
+    short, _, tested = tighten(cube, zeros, _block_and_sheet, None, None, 6, min_removed=0.2)
+    long, _, all_tested = tighten(cube, zeros, _block_and_sheet, None, None, 6)
+    assert (tested, all_tested) == (8 * 8, 8 * 8 + 64 * 8)
+    assert np.isclose(volume(short), 1.0) and np.isclose(volume(long), 1.0)
+    counts = np.zeros(sheet.shape[0], dtype=np.int64)
+    ruled, _, ruled_tested = tighten(
+        sheet, counts, _block_and_sheet, None, None, 6, min_removed=0.2
+    )
+    plain, _, plain_tested = tighten(sheet, counts, _block_and_sheet, None, None, 6)
+    assert np.array_equal(ruled, plain) and ruled_tested == plain_tested
+    assert volume(plain) < 0.5 * volume(sheet)
+    both = np.concatenate([cube, sheet])  # calls 1 and 2 remove 27 and 18 % of what they cut
+    counts = np.zeros(both.shape[0], dtype=np.int64)
+    mixed, _, mixed_tested = tighten(both, counts, _block_and_sheet, None, None, 9, min_removed=0.2)
+    first = tighten(both, counts, _block_and_sheet, None, None, 3)[0]
+    second, _, second_tested = tighten(both, counts, _block_and_sheet, None, None, 6)
+    deep_tested = tighten(both, counts, _block_and_sheet, None, None, 9)[2]
+    assert 1.0 - volume(first) / volume(both) > 0.2 > 1.0 - volume(second) / volume(first)
+    assert np.array_equal(mixed, second) and mixed_tested == second_tested < deep_tested
+    rng = np.random.default_rng(7)
+    points = rng.uniform([0.0, 0.0, 0.0], [4.0, 2.0, 1.75], (100000, 3))
+    x, y = points[:20000, 0], points[:20000, 1]
+    points[:20000, 2] = 0.3 * x + 0.2 * y + rng.uniform(-0.02, 0.02, 20000)
+    in_cube = np.all((points >= 0.0) & (points <= 1.0), axis=1)
+    on_sheet = np.abs(points[:, 2] - 0.3 * points[:, 0] - 0.2 * points[:, 1]) <= 0.02
+    on_sheet &= (points[:, 0] >= 2.0) & (points[:, 2] >= 0.5) & (points[:, 2] <= 1.75)
+    assert np.count_nonzero(in_cube) > 5000 and np.count_nonzero(on_sheet) > 5000
+    assert contains_points(short, points[in_cube]).any(axis=0).all()
+    assert contains_points(ruled, points[on_sheet]).any(axis=0).all()
+    assert contains_points(mixed, points[in_cube | on_sheet]).any(axis=0).all()
+
+
+def test_the_pipeline_s_pass_ends_on_calls_that_remove_little_and_stays_sound(monkeypatch):
+    """:func:`intervals.localize.localize` hands the pass
+    :data:`intervals.tighten.MIN_REMOVED_SHARE`: for random rooms the pass tests at most as
+    many pieces as without the rule, and every sampled pose that explains all but ``q``
+    readings stays in the set."""
+    import intervals.localize as loc
+
+    seen, tighten_pass = [], loc.tighten
+
+    def passing(*args, **kwargs):
+        boxes, counts, tested = tighten_pass(*args, **kwargs)
+        seen.append((kwargs["min_removed"], tested))
+        return boxes, counts, tested
+
+    monkeypatch.setattr(loc, "tighten", passing)
+    rng = np.random.default_rng(34)
+    kept = 0
+    for case in range(4):
+        scan, params, truth, q, prior = _outlier_case(rng, case, [0.4, 0.4, 0.2])
+        plain = localize(scan, prior, 0.05, q=q)
+        assert not plain.is_empty
+        ruled = localize(scan, prior, 0.05, q=q, tighten_levels=9)
+        monkeypatch.setattr(loc, "MIN_REMOVED_SHARE", 0.0)
+        full = localize(scan, prior, 0.05, q=q, tighten_levels=9)
+        monkeypatch.setattr(loc, "MIN_REMOVED_SHARE", MIN_REMOVED_SHARE)
+        (rule, ruled_tested), (none, full_tested) = seen[-2:]
+        assert (rule, none) == (MIN_REMOVED_SHARE, 0.0) and 0 < ruled_tested <= full_tested
+        assert full.volume() <= ruled.volume() < plain.volume()
+        poses = _poses_in(plain.outer, truth, rng, 2000)
+        fits = wrong_readings(poses, scan, params) <= q
+        assert not np.any(fits & ~contains_points(ruled.outer, poses).any(axis=0))
+        kept += int(np.count_nonzero(fits))
+    assert kept > 200  # the check saw consistent poses
 
 
 @pytest.mark.parametrize("scaled, with_idle", list(itertools.product((False, True), repeat=2)))
