@@ -617,8 +617,13 @@ class IntervalTracker:
             if cheap and blind:
                 predicted, joined = self.predict(previous, dt_s, each_box=True), False
             else:
-                predicted = as_boxes(self.predict(previous, dt_s, apart))
+                predicted = self.predict(previous, dt_s, apart)
                 joined = not apart or s.whole_boxes  # overlapping boxes kept whole would overlap
+            if predicted.shape[0] == 0:  # no pose reachable within the map: the motion failed
+                return EpochResult(
+                    None, None, EpochStatus.INCONSISTENT, time.perf_counter() - start
+                )
+            predicted = as_boxes(predicted)
             if s.tracker == Tracker.SIVIA and joined and predicted.shape[0] > 1:
                 # paved from the whole hull, as for one component (the same bisections, so
                 # never a looser set), every box outside the components' predictions rejected

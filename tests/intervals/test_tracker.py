@@ -193,3 +193,19 @@ def test_a_set_the_sonar_cannot_constrain_stays_inside_the_map():
         poses[:, 2] = np.mod(poses[:, 2] + np.pi, 2 * np.pi) - np.pi
         assert result.paving.contains(poses).all()
         previous = result.paving
+
+
+@pytest.mark.parametrize("kind", [Tracker.SIVIA, Tracker.IMAGESP])
+def test_a_set_out_of_reach_of_the_map_gives_an_inconsistent_epoch(kind):
+    """A previous set 90 m past ``hall``'s walls (a caller's set, or a motion beyond the limits)
+    reaches no pose inside the map bounds within 1 s: the epoch is inconsistent (no set), not
+    an error, and the next epoch, given no set, searches globally and holds the truth."""
+    rng = np.random.default_rng(36)
+    tracker = _tracker(kind)
+    far = np.array([[[100.0, 101.0], [100.0, 101.0], [0.0, 0.1]]])
+    truth = circuit_poses(1)[0]
+    scan = _scan(truth, rng)
+    result = tracker.step(Subpaving(np.zeros((0, 3, 2)), far, False), scan, 1.0)
+    assert result.status == "inconsistent" and not result.consistent
+    found = tracker.step(None, scan, 1.0)
+    assert found.status == "global" and found.paving.contains(truth[None])[0]
