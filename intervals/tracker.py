@@ -436,9 +436,14 @@ class IntervalTracker:
         """Boxes grown by the physical limits: ``v_max dt`` in x and y, ``omega_max dt`` in
         heading (every pose reachable in ``dt_s`` from a pose of the box), then cut to the map
         bounds in x and y (:meth:`in_bounds`)."""
+        return self.in_bounds(self._grown(boxes, dt_s))
+
+    def _grown(self, boxes: np.ndarray, dt_s: float) -> np.ndarray:
+        """:meth:`limits` before the cut to the bounds: one grown box ``(N, 3, 2)`` a box (the
+        IMAGESP inclusion function's shape; its cells are cut afterwards)."""
         s = self.settings
         reach = s.v_max_m_s * dt_s
-        return self.in_bounds(inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s]))
+        return inflate(boxes, [reach, reach, s.omega_max_rad_s * dt_s])
 
     def in_bounds(self, boxes: np.ndarray) -> np.ndarray:
         """``boxes (N, 3, 2)`` cut to the map bounds in x and y, those left empty dropped: the
@@ -491,7 +496,7 @@ class IntervalTracker:
             return self.in_bounds(coarsen(grown, LOST_ECHO_PREDICTED_BOXES, scale))
         if s.tracker == Tracker.SIVIA:
             return wrap_headings(self.limits(self.groups(boxes, apart), dt_s))
-        motion = self.motion if self.motion is not None else self.limits
+        motion = self.motion if self.motion is not None else self._grown
         try:
             cells = imagesp(
                 lambda b: motion(b, dt_s),
