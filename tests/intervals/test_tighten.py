@@ -57,6 +57,18 @@ def _outlier_case(rng, case, half_widths):
     return scan, params, truth, q, np.stack([truth - half_widths, truth + half_widths], axis=-1)
 
 
+def _plain_cases(seed, half_widths, count=4):
+    """``count`` cases of :func:`_outlier_case` from ``default_rng(seed)``, each with its plain
+    paving (not empty): ``(rng, scan, params, truth, q, prior, plain)`` (``rng`` for the case's
+    own samples, drawn before the next case)."""
+    rng = np.random.default_rng(seed)
+    for case in range(count):
+        scan, params, truth, q, prior = _outlier_case(rng, case, half_widths)
+        plain = localize(scan, prior, 0.05, q=q)
+        assert not plain.is_empty
+        yield rng, scan, params, truth, q, prior, plain
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("gamma", GAMMAS_RAD)
 def test_every_consistent_pose_stays_in_the_tightened_set(gamma):
@@ -293,12 +305,8 @@ def test_a_test_budget_bounds_the_pieces_and_keeps_every_consistent_pose():
     holds at most that many boxes more than the plain set (each tested piece is at most one
     box), lies between the fully tightened set and the plain one in volume, and keeps every
     sampled pose that explains all but ``q`` readings."""
-    rng = np.random.default_rng(41)
     kept = 0
-    for case in range(4):
-        scan, params, truth, q, prior = _outlier_case(rng, case, [0.3, 0.3, 0.15])
-        plain = localize(scan, prior, 0.05, q=q)
-        assert not plain.is_empty
+    for rng, scan, params, truth, q, prior, plain in _plain_cases(41, [0.3, 0.3, 0.15]):
         full = localize(scan, prior, 0.05, q=q, tighten_levels=9)
         none = localize(scan, prior, 0.05, q=q, tighten_levels=9, tighten_max_tested=0)
         assert np.array_equal(none.outer, plain.outer)
@@ -478,12 +486,8 @@ def test_the_pipeline_s_pass_ends_on_calls_that_remove_little_and_stays_sound(mo
         return boxes, counts, tested
 
     monkeypatch.setattr(loc, "tighten", passing)
-    rng = np.random.default_rng(34)
     kept = 0
-    for case in range(4):
-        scan, params, truth, q, prior = _outlier_case(rng, case, [0.4, 0.4, 0.2])
-        plain = localize(scan, prior, 0.05, q=q)
-        assert not plain.is_empty
+    for rng, scan, params, truth, q, prior, plain in _plain_cases(34, [0.4, 0.4, 0.2]):
         ruled = localize(scan, prior, 0.05, q=q, tighten_levels=9)
         monkeypatch.setattr(loc, "MIN_REMOVED_SHARE", 0.0)
         full = localize(scan, prior, 0.05, q=q, tighten_levels=9)
