@@ -671,10 +671,11 @@ class IntervalTracker:
             # a tracking set the budget cut short is large by nature (its prediction holds it,
             # as the parts the scan cannot split are kept whole): refining it on its scan next
             # epoch would double that epoch's cost for a set the next scan paves anyway. A
-            # lossy belt's tracking sets never are: on big_hall with half its echoes lost
-            # (seeds 1, 2) chains of them, fine sets of 10 000 to 30 000 boxes growing under
-            # two or three echoes, then cut short, cost 50 to 960 ms an epoch for 8 epochs
-            # (BENCHMARKS.md, "Lost echoes: the slow epochs were a refinement's chain")
+            # lossy belt's tracking sets are never handed on, fine or cut short: on big_hall
+            # with half its echoes lost (seeds 1, 2) chains of them, fine sets of 10 000 to
+            # 30 000 boxes growing under two or three echoes, then cut short, cost 50 to 960 ms
+            # an epoch for 8 epochs (BENCHMARKS.md, "Lost echoes: the slow epochs were a
+            # refinement's chain")
             pending = None
         elif pending is None or not coarse:
             # kept for the next epoch: this set, finer than the report merged to max_boxes
