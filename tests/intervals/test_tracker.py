@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from intervals.boxes import Subpaving, unwrap_headings
+from intervals.boxes import Subpaving, contains_boxes, contains_points, unwrap_headings
 from intervals.errors import IntervalError
 from intervals.sonar.scan import SonarBelt, SonarScan
 from intervals.tracker import IntervalTracker, Tracker, TrackerSettings
@@ -159,14 +159,12 @@ def test_predictions_are_cut_to_the_map_bounds_and_keep_every_pose_in_them():
     boxes[:, :2, 0], boxes[:, :2, 1] = centre - half, centre + half
     boxes[:, 2] = [-0.5, 0.5]
     cut = tracker.in_bounds(boxes)
-    assert (cut[:, :2, 0] >= bounds[:, 0]).all() and (cut[:, :2, 1] <= bounds[:, 1]).all()
+    assert contains_boxes(bounds, cut[:, :2]).all()
     outside = ((boxes[:, :2, 1] < bounds[:, 0]) | (boxes[:, :2, 0] > bounds[:, 1])).any(axis=1)
     assert outside.sum() > 0 and cut.shape[0] == 200 - outside.sum()
     poses = rng.uniform(boxes[..., 0], boxes[..., 1], size=(20, 200, 3)).reshape(-1, 3)
-    poses = poses[((poses[:, :2] >= bounds[:, 0]) & (poses[:, :2] <= bounds[:, 1])).all(axis=1)]
-    lo, hi = cut[None, :, :, 0], cut[None, :, :, 1]
-    held = ((poses[:, None] >= lo) & (poses[:, None] <= hi)).all(axis=2).any(axis=1)
-    assert poses.shape[0] > 1000 and held.all()
+    poses = poses[contains_points(bounds[None], poses[:, :2])[0]]
+    assert poses.shape[0] > 1000 and contains_points(cut, poses).any(axis=0).all()
 
 
 def test_a_set_the_sonar_cannot_constrain_stays_inside_the_map():
@@ -185,11 +183,10 @@ def test_a_set_the_sonar_cannot_constrain_stays_inside_the_map():
     previous = Subpaving(np.zeros((0, 3, 2)), box[None], False)
     for epoch in range(1, 41):
         result = tracker.step(previous, blind, 1.0)
-        outer = result.outer
-        assert (outer[:, :2, 0] >= bounds[:, 0]).all() and (outer[:, :2, 1] <= bounds[:, 1]).all()
+        assert contains_boxes(bounds, result.outer[:, :2]).all()
         reach = np.array([0.5, 0.5, 0.5]) * epoch
         poses = rng.uniform(start - reach, start + reach, size=(300, 3))
-        poses = poses[((poses[:, :2] >= bounds[:, 0]) & (poses[:, :2] <= bounds[:, 1])).all(axis=1)]
+        poses = poses[contains_points(bounds[None], poses[:, :2])[0]]
         poses[:, 2] = np.mod(poses[:, 2] + np.pi, 2 * np.pi) - np.pi
         assert result.paving.contains(poses).all()
         previous = result.paving
